@@ -1,0 +1,265 @@
+//! Noise-injected policies, each seeded through the rollout's generator:
+//! epsilon-greedy random actions (D-REX), Gaussian action noise, Ornstein-Uhlenbeck noise,
+//! time-correlated (held) noise, and probabilistic interpolation between two policies
+//! (iD-REX, the report's equation 6). Every actor's output is clipped to the action box by
+//! the rollout loop.
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use crate::nn::policy::CpuPolicy;
+use crate::rollout::Actor;
+
+/// A policy acting with its mean action or sampling from its Gaussian.
+pub struct PolicyActor {
+    pub policy: CpuPolicy,
+    pub stochastic: bool,
+    nobs: Vec<f32>,
+    mean: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl PolicyActor {
+    pub fn new(policy: CpuPolicy, stochastic: bool) -> Self {
+        let (od, ad) = (policy.obs_dim(), policy.act_dim());
+        PolicyActor { policy, stochastic, nobs: vec![0.0; od], mean: vec![0.0; ad], scratch: Vec::new() }
+    }
+}
+
+impl Actor for PolicyActor {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        self.policy.normalize(obs, &mut self.nobs);
+        self.policy.mean(&self.nobs, &mut self.mean, &mut self.scratch);
+        if self.stochastic {
+            self.policy.sample(&self.mean, rng, out);
+        } else {
+            out.copy_from_slice(&self.mean);
+        }
+    }
+}
+
+/// Uniform actions in the box. Used alone and as the random part of epsilon-greedy.
+pub struct UniformActor {
+    pub low: Vec<f64>,
+    pub high: Vec<f64>,
+}
+
+impl Actor for UniformActor {
+    fn act(&mut self, _obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        for ((o, &l), &h) in out.iter_mut().zip(&self.low).zip(&self.high) {
+            *o = rng.random_range(l..h) as f32;
+        }
+    }
+}
+
+/// With probability `eps` a uniform random action in the box, else the inner policy's.
+pub struct EpsilonGreedy<A> {
+    pub inner: A,
+    pub eps: f64,
+    pub uniform: UniformActor,
+}
+
+impl<A: Actor> Actor for EpsilonGreedy<A> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        if rng.random_bool(self.eps.clamp(0.0, 1.0)) {
+            self.uniform.act(obs, rng, out);
+        } else {
+            self.inner.act(obs, rng, out);
+        }
+    }
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+}
+
+/// The inner action plus `sigma * N(0, I)` (iD-REX variant 2).
+pub struct GaussianNoise<A> {
+    pub inner: A,
+    pub sigma: f64,
+}
+
+impl<A: Actor> Actor for GaussianNoise<A> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        self.inner.act(obs, rng, out);
+        for o in out.iter_mut() {
+            *o += (self.sigma * rng.sample::<f64, _>(StandardNormal)) as f32;
+        }
+    }
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+}
+
+/// The inner action plus Ornstein-Uhlenbeck noise
+/// `x += theta (0 - x) dt + sigma sqrt(dt) N(0, I)`, restarted at 0 every episode.
+pub struct OrnsteinUhlenbeck<A> {
+    pub inner: A,
+    pub sigma: f64,
+    pub theta: f64,
+    pub dt: f64,
+    state: Vec<f64>,
+}
+
+impl<A> OrnsteinUhlenbeck<A> {
+    /// The usual DDPG constants: theta 0.15, dt 0.01.
+    pub fn new(inner: A, sigma: f64, act_dim: usize) -> Self {
+        OrnsteinUhlenbeck { inner, sigma, theta: 0.15, dt: 1e-2, state: vec![0.0; act_dim] }
+    }
+}
+
+impl<A: Actor> Actor for OrnsteinUhlenbeck<A> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        self.inner.act(obs, rng, out);
+        for (o, x) in out.iter_mut().zip(&mut self.state) {
+            *x += -self.theta * *x * self.dt + self.sigma * self.dt.sqrt() * rng.sample::<f64, _>(StandardNormal);
+            *o += *x as f32;
+        }
+    }
+    fn reset(&mut self) {
+        self.state.iter_mut().for_each(|x| *x = 0.0);
+        self.inner.reset();
+    }
+}
+
+/// The inner action plus Gaussian noise that is redrawn every `period` steps and held
+/// in between: perturbations that persist long enough to change the gait.
+pub struct TimeCorrelated<A> {
+    pub inner: A,
+    pub sigma: f64,
+    pub period: usize,
+    step: usize,
+    noise: Vec<f64>,
+}
+
+impl<A> TimeCorrelated<A> {
+    pub fn new(inner: A, sigma: f64, period: usize, act_dim: usize) -> Self {
+        TimeCorrelated { inner, sigma, period: period.max(1), step: 0, noise: vec![0.0; act_dim] }
+    }
+}
+
+impl<A: Actor> Actor for TimeCorrelated<A> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        self.inner.act(obs, rng, out);
+        if self.step % self.period == 0 {
+            for n in &mut self.noise {
+                *n = self.sigma * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+        self.step += 1;
+        for (o, n) in out.iter_mut().zip(&self.noise) {
+            *o += *n as f32;
+        }
+    }
+    fn reset(&mut self) {
+        self.step = 0;
+        self.inner.reset();
+    }
+}
+
+/// pi(.|alpha): with probability alpha the newer policy's action, else the older one's
+/// (the report's equation 6).
+pub struct Interpolation<A, B> {
+    pub newer: A,
+    pub older: B,
+    pub alpha: f64,
+}
+
+impl<A: Actor, B: Actor> Actor for Interpolation<A, B> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        if rng.random_bool(self.alpha.clamp(0.0, 1.0)) {
+            self.newer.act(obs, rng, out);
+        } else {
+            self.older.act(obs, rng, out);
+        }
+    }
+    fn reset(&mut self) {
+        self.newer.reset();
+        self.older.reset();
+    }
+}
+
+/// Acts with a fixed action; a stand-in policy for tests.
+pub struct ConstantActor(pub Vec<f32>);
+
+impl Actor for ConstantActor {
+    fn act(&mut self, _obs: &[f32], _rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        out.copy_from_slice(&self.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn run(actor: &mut dyn Actor, n: usize, seed: u64) -> Vec<Vec<f32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        actor.reset();
+        (0..n)
+            .map(|_| {
+                let mut a = vec![0.0; 2];
+                actor.act(&[0.0], &mut rng, &mut a);
+                a
+            })
+            .collect()
+    }
+
+    #[test]
+    fn epsilon_one_is_uniform_over_the_box() {
+        let mut a = EpsilonGreedy {
+            inner: ConstantActor(vec![0.5, 0.5]),
+            eps: 1.0,
+            uniform: UniformActor { low: vec![-1.0, -2.0], high: vec![1.0, 2.0] },
+        };
+        let acts = run(&mut a, 20_000, 0);
+        for (d, (lo, hi)) in [(-1.0f32, 1.0f32), (-2.0, 2.0)].into_iter().enumerate() {
+            let xs: Vec<f32> = acts.iter().map(|a| a[d]).collect();
+            assert!(xs.iter().all(|&x| x >= lo && x < hi));
+            // Ten equal bins, each within 10 % of its expected 2,000.
+            let mut bins = [0usize; 10];
+            for x in &xs {
+                bins[(((x - lo) / (hi - lo)) * 10.0) as usize] += 1;
+            }
+            assert!(bins.iter().all(|&b| (1800..=2200).contains(&b)), "{bins:?}");
+            let mean = xs.iter().sum::<f32>() / xs.len() as f32;
+            assert!(mean.abs() < 0.02 * (hi - lo), "mean {mean}");
+        }
+    }
+
+    #[test]
+    fn epsilon_zero_is_the_policy_and_seeds_reproduce() {
+        let mut a = EpsilonGreedy {
+            inner: ConstantActor(vec![0.5, 0.5]),
+            eps: 0.0,
+            uniform: UniformActor { low: vec![-1.0; 2], high: vec![1.0; 2] },
+        };
+        assert!(run(&mut a, 100, 0).iter().all(|x| x == &vec![0.5, 0.5]));
+        let mut g = GaussianNoise { inner: ConstantActor(vec![0.0, 0.0]), sigma: 0.3 };
+        assert_eq!(run(&mut g, 50, 3), run(&mut g, 50, 3));
+        assert_ne!(run(&mut g, 50, 3), run(&mut g, 50, 4));
+    }
+
+    #[test]
+    fn noise_processes_have_their_shape() {
+        let mut g = GaussianNoise { inner: ConstantActor(vec![0.0, 0.0]), sigma: 0.5 };
+        let xs: Vec<f32> = run(&mut g, 20_000, 1).iter().map(|a| a[0]).collect();
+        let var = xs.iter().map(|x| x * x).sum::<f32>() / xs.len() as f32;
+        assert!((var - 0.25).abs() < 0.01, "variance {var}");
+        // Held noise changes only every `period` steps.
+        let mut t = TimeCorrelated::new(ConstantActor(vec![0.0, 0.0]), 1.0, 5, 2);
+        let xs = run(&mut t, 20, 2);
+        assert!(xs[0] == xs[4] && xs[4] != xs[5] && xs[5] == xs[9]);
+        // OU noise is correlated step to step.
+        let mut o = OrnsteinUhlenbeck::new(ConstantActor(vec![0.0, 0.0]), 1.0, 2);
+        let xs: Vec<f32> = run(&mut o, 5000, 3).iter().map(|a| a[0]).collect();
+        let lag1 = xs.windows(2).map(|w| w[0] * w[1]).sum::<f32>() / xs.iter().map(|x| x * x).sum::<f32>();
+        assert!(lag1 > 0.9, "lag-1 autocorrelation {lag1}");
+    }
+
+    #[test]
+    fn interpolation_takes_the_newer_policy_with_probability_alpha() {
+        let mut i = Interpolation { newer: ConstantActor(vec![1.0, 1.0]), older: ConstantActor(vec![-1.0, -1.0]), alpha: 0.3 };
+        let newer = run(&mut i, 10_000, 5).iter().filter(|a| a[0] > 0.0).count();
+        assert!((2800..=3200).contains(&newer), "{newer}");
+    }
+}

@@ -1,0 +1,374 @@
+//! T-REX reward learning from ranked trajectories.
+//!
+//! Each trajectory carries a score (higher is better; D-REX uses minus the noise level).
+//! A training pair takes two trajectories whose scores differ by at least `min_margin`
+//! (from the same group, when `same_group`), an independent random window of the same length
+//! from each, and labels the better-scored window as preferred. The loss is Bradley-Terry:
+//! softmax cross-entropy over the two windows' summed predicted rewards, plus
+//! `l2 * sum of squared weights`. Each model of the ensemble trains on its own pairs.
+use rand::seq::IndexedRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use tch::{Kind, Tensor, nn::OptimizerConfig};
+
+use crate::data::Trajectory;
+use crate::error::{Error, Result};
+use crate::nn::{RewardConfig, RewardEnsemble};
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrexConfig {
+    pub hidden: Vec<usize>,
+    pub models: usize,
+    pub pairs_per_model: usize,
+    /// Window length in steps (shortened to the shorter trajectory where needed).
+    pub window: usize,
+    /// Smallest score difference for a pair.
+    pub min_margin: f64,
+    /// Pair only trajectories of the same group (multi-BC ranks within one clone).
+    pub same_group: bool,
+    pub lr: f64,
+    pub batch_size: usize,
+    pub iterations: usize,
+    pub l2: f64,
+    pub val_fraction: f64,
+    /// Feed the action to the reward net too.
+    pub action_input: bool,
+}
+
+impl Default for TrexConfig {
+    fn default() -> Self {
+        TrexConfig {
+            hidden: vec![256, 256],
+            models: 3,
+            pairs_per_model: 5000,
+            window: 50,
+            min_margin: 0.3,
+            same_group: false,
+            lr: 1e-4,
+            batch_size: 64,
+            iterations: 3000,
+            l2: 0.01,
+            val_fraction: 0.2,
+            action_input: false,
+        }
+    }
+}
+
+/// A training pair: windows `(trajectory, start)` of length `len`; `label` is 0 when the
+/// first window is preferred, 1 when the second is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pair {
+    pub a: (usize, usize),
+    pub b: (usize, usize),
+    pub len: usize,
+    pub label: i64,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ModelReport {
+    pub train_pairs: usize,
+    pub val_pairs: usize,
+    pub final_loss: f64,
+    pub train_accuracy: f64,
+    pub val_accuracy: f64,
+    /// (iteration, loss, batch accuracy) every 50 iterations, for the learning-curve plot.
+    pub curve: Vec<(usize, f64, f64)>,
+}
+
+/// Which trajectory is preferred to which.
+///
+/// `i` is preferred to `j` when both are in the same group (or groups are ignored) and
+/// `scores[i] - scores[j] >= min_margin`; with `cross_level`, also whenever
+/// `levels[i] > levels[j]` (iD-REX's equation 8: later iterations rank higher).
+#[derive(Debug, Clone, Default)]
+pub struct Ranking {
+    pub scores: Vec<f64>,
+    pub groups: Vec<usize>,
+    pub levels: Vec<usize>,
+    pub same_group: bool,
+    pub cross_level: bool,
+}
+
+impl Ranking {
+    /// Scores alone, one group, one level (D-REX, or T-REX with ranked returns).
+    pub fn by_score(scores: Vec<f64>) -> Self {
+        let n = scores.len();
+        Ranking { scores, groups: vec![0; n], levels: vec![0; n], same_group: false, cross_level: false }
+    }
+
+    fn prefers(&self, i: usize, j: usize, margin: f64) -> bool {
+        let group_ok = !self.same_group || self.groups[i] == self.groups[j];
+        let by_score = group_ok && self.levels[i] == self.levels[j] && self.scores[i] - self.scores[j] >= margin - 1e-12;
+        by_score || (self.cross_level && self.levels[i] > self.levels[j])
+    }
+}
+
+/// Samples `n` pairs. Fails when no two trajectories can be compared.
+pub fn sample_pairs(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, n: usize, rng: &mut ChaCha8Rng) -> Result<Vec<Pair>> {
+    let mut candidates = Vec::new();
+    for i in 0..trajs.len() {
+        for j in 0..trajs.len() {
+            if i != j && ranking.prefers(i, j, cfg.min_margin) && !trajs[i].is_empty() && !trajs[j].is_empty() {
+                candidates.push((i, j)); // i is better than j
+            }
+        }
+    }
+    if candidates.is_empty() {
+        return Err(Error::Invalid(format!(
+            "no two trajectories have scores at least {} apart{}; lower min_margin or widen the noise schedule",
+            cfg.min_margin,
+            if ranking.same_group { " within one group" } else { "" }
+        )));
+    }
+    Ok((0..n)
+        .map(|_| {
+            let &(better, worse) = candidates.choose(rng).expect("non-empty");
+            let len = cfg.window.min(trajs[better].len()).min(trajs[worse].len());
+            let start = |t: &Trajectory, rng: &mut ChaCha8Rng| rng.random_range(0..=t.len() - len);
+            let wb = (better, start(&trajs[better], rng));
+            let ww = (worse, start(&trajs[worse], rng));
+            if rng.random_bool(0.5) { Pair { a: wb, b: ww, len, label: 0 } } else { Pair { a: ww, b: wb, len, label: 1 } }
+        })
+        .collect())
+}
+
+/// Builds the input rows and segment ids (2 per pair) of a batch of pairs.
+fn batch(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool) -> (Tensor, Tensor, Tensor) {
+    let od = trajs[0].obs_dim;
+    let ad = trajs[0].act_dim;
+    let width = od + if action_input { ad } else { 0 };
+    let total: usize = pairs.iter().map(|p| 2 * p.len).sum();
+    let mut rows = Vec::with_capacity(total * width);
+    let mut seg = Vec::with_capacity(total);
+    for (k, p) in pairs.iter().enumerate() {
+        for (side, (ti, start)) in [p.a, p.b].into_iter().enumerate() {
+            let t = &trajs[ti];
+            for s in start..start + p.len {
+                // The reward of step s is paid on s_{s+1}.
+                rows.extend_from_slice(t.obs_row(s + 1));
+                if action_input {
+                    rows.extend_from_slice(t.action_row(s));
+                }
+                seg.push((2 * k + side) as i64);
+            }
+        }
+    }
+    let labels: Vec<i64> = pairs.iter().map(|p| p.label).collect();
+    (Tensor::from_slice(&rows).view([total as i64, width as i64]), Tensor::from_slice(&seg), Tensor::from_slice(&labels))
+}
+
+fn logits(model: &RewardEnsemble, m: usize, x: &Tensor, seg: &Tensor, n_pairs: usize) -> Tensor {
+    let r = model.forward(m, x);
+    Tensor::zeros([2 * n_pairs as i64], (Kind::Float, tch::Device::Cpu)).index_add(0, seg, &r).view([n_pairs as i64, 2])
+}
+
+fn accuracy(model: &RewardEnsemble, m: usize, trajs: &[Trajectory], pairs: &[Pair], action_input: bool) -> f64 {
+    if pairs.is_empty() {
+        return f64::NAN;
+    }
+    tch::no_grad(|| {
+        let mut correct = 0.0;
+        for chunk in pairs.chunks(256) {
+            let refs: Vec<&Pair> = chunk.iter().collect();
+            let (x, seg, labels) = batch(trajs, &refs, action_input);
+            let pred = logits(model, m, &x, &seg, chunk.len()).argmax(1, false);
+            correct += pred.eq_tensor(&labels).sum(Kind::Float).double_value(&[]);
+        }
+        correct / pairs.len() as f64
+    })
+}
+
+/// Trains an ensemble on ranked trajectories; returns it with one report per model.
+pub fn train(
+    trajs: &[Trajectory],
+    ranking: &Ranking,
+    cfg: &TrexConfig,
+    ctrl_coeff: f64,
+    seed: u64,
+) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
+    if trajs.is_empty() || trajs.len() != ranking.scores.len() {
+        return Err(Error::Invalid("T-REX needs one score per trajectory and at least two trajectories".into()));
+    }
+    let obs_dim = trajs[0].obs_dim;
+    let config = RewardConfig {
+        obs_dim,
+        act_dim: cfg.action_input.then_some(trajs[0].act_dim),
+        hidden: cfg.hidden.clone(),
+        models: cfg.models,
+        clip: 100.0,
+        ctrl_coeff,
+    };
+    let model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
+    let mut reports = Vec::new();
+    for m in 0..cfg.models {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1000).wrapping_add(m as u64));
+        let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
+        let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
+        let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
+        let mut opt = tch::nn::Adam::default().build(&model.stores[m], cfg.lr)?;
+        let mut final_loss = f64::NAN;
+        let mut curve = Vec::new();
+        for it in 0..cfg.iterations {
+            let picks: Vec<&Pair> = (0..cfg.batch_size).map(|_| &train[rng.random_range(0..train.len())]).collect();
+            let (x, seg, labels) = batch(trajs, &picks, cfg.action_input);
+            let lg = logits(&model, m, &x, &seg, picks.len());
+            let ce = lg.cross_entropy_for_logits(&labels);
+            let loss = &ce + cfg.l2 * model.nets[m].weight_l2();
+            opt.backward_step(&loss);
+            final_loss = ce.double_value(&[]);
+            if it % 50 == 0 || it + 1 == cfg.iterations {
+                let acc = lg.argmax(1, false).eq_tensor(&labels).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]);
+                curve.push((it, final_loss, acc));
+            }
+        }
+        reports.push(ModelReport {
+            train_pairs: train.len(),
+            val_pairs: val.len(),
+            final_loss,
+            train_accuracy: accuracy(&model, m, trajs, train, cfg.action_input),
+            val_accuracy: accuracy(&model, m, trajs, val, cfg.action_input),
+            curve,
+        });
+    }
+    Ok((model, reports))
+}
+
+/// Spearman rank correlation (average ranks for ties).
+pub fn spearman(x: &[f64], y: &[f64]) -> f64 {
+    pearson(&ranks(x), &ranks(y))
+}
+
+pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let cov: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let vx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
+    let vy: f64 = y.iter().map(|b| (b - my).powi(2)).sum();
+    cov / (vx * vy).sqrt()
+}
+
+fn ranks(v: &[f64]) -> Vec<f64> {
+    let mut idx: Vec<usize> = (0..v.len()).collect();
+    idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+    let mut r = vec![0.0; v.len()];
+    let mut i = 0;
+    while i < idx.len() {
+        let mut j = i;
+        while j + 1 < idx.len() && v[idx[j + 1]] == v[idx[i]] {
+            j += 1;
+        }
+        for &k in &idx[i..=j] {
+            r[k] = (i + j) as f64 / 2.0;
+        }
+        i = j + 1;
+    }
+    r
+}
+
+/// Fraction of trajectory pairs (with different true returns) whose predicted order is right.
+pub fn pairwise_accuracy(pred: &[f64], truth: &[f64]) -> f64 {
+    let (mut right, mut total) = (0usize, 0usize);
+    for i in 0..pred.len() {
+        for j in i + 1..pred.len() {
+            if truth[i] != truth[j] {
+                total += 1;
+                right += usize::from((pred[i] > pred[j]) == (truth[i] > truth[j]));
+            }
+        }
+    }
+    right as f64 / total.max(1) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::TrajMeta;
+
+    /// Toy trajectories in a 3-d observation space whose true reward is obs[0] - obs[1];
+    /// the score handed to T-REX is the true return, as T-REX's ranked checkpoints are.
+    fn toy(n: usize, rng: &mut ChaCha8Rng) -> Vec<Trajectory> {
+        (0..n)
+            .map(|k| {
+                let drift = rng.random_range(-1.0..1.0f32);
+                let mut obs = Vec::new();
+                for _ in 0..=40 {
+                    obs.extend([
+                        drift + rng.random_range(-0.5..0.5f32),
+                        -drift + rng.random_range(-0.5..0.5f32),
+                        rng.random_range(-1.0..1.0f32),
+                    ]);
+                }
+                let rewards = (1..=40).map(|t| (obs[3 * t] - obs[3 * t + 1]) as f64).collect();
+                Trajectory {
+                    obs_dim: 3,
+                    act_dim: 1,
+                    obs,
+                    actions: vec![0.0; 40],
+                    rewards,
+                    terms: vec![Default::default(); 40],
+                    meta: TrajMeta { group: k % 2, ..Default::default() },
+                    ..Default::default()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn learns_to_rank_trajectories_of_a_known_reward() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let train_set = toy(30, &mut rng);
+        let test_set = toy(30, &mut rng);
+        let scores: Vec<f64> = train_set.iter().map(|t| t.ret()).collect();
+        let cfg = TrexConfig {
+            hidden: vec![32, 32],
+            models: 2,
+            pairs_per_model: 1000,
+            window: 20,
+            min_margin: 1.0,
+            lr: 1e-3,
+            iterations: 300,
+            l2: 0.0,
+            ..Default::default()
+        };
+        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 0.0, 1).unwrap();
+        assert!(reports.iter().all(|r| r.val_accuracy > 0.85), "{reports:?}");
+        let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
+        let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
+        assert!(spearman(&pred, &truth) > 0.9, "spearman {}", spearman(&pred, &truth));
+        assert!(pairwise_accuracy(&pred, &truth) > 0.85);
+    }
+
+    #[test]
+    fn pairs_respect_margin_and_groups() {
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let trajs = toy(10, &mut rng);
+        let scores: Vec<f64> = (0..10).map(|i| i as f64 * 0.1).collect();
+        let cfg = TrexConfig { min_margin: 0.3, window: 50, ..Default::default() };
+        let groups = trajs.iter().map(|t| t.meta.group).collect();
+        let ranking = Ranking { scores: scores.clone(), groups, levels: vec![0; 10], same_group: true, cross_level: false };
+        let pairs = sample_pairs(&trajs, &ranking, &cfg, 500, &mut rng).unwrap();
+        for p in &pairs {
+            let (better, worse) = if p.label == 0 { (p.a.0, p.b.0) } else { (p.b.0, p.a.0) };
+            assert!(scores[better] - scores[worse] >= 0.3 - 1e-9);
+            assert_eq!(trajs[better].meta.group, trajs[worse].meta.group);
+            assert_eq!(p.len, 40, "windows shrink to the trajectory length");
+        }
+        let too_far = TrexConfig { min_margin: 5.0, ..cfg.clone() };
+        assert!(sample_pairs(&trajs, &ranking, &too_far, 1, &mut rng).unwrap_err().to_string().contains("lower min_margin"));
+        // Across levels the later iteration wins whatever the scores.
+        let levels = Ranking { levels: (0..10).map(|i| usize::from(i < 2)).collect(), cross_level: true, ..ranking };
+        let pairs = sample_pairs(&trajs, &levels, &TrexConfig { min_margin: 5.0, ..cfg }, 200, &mut rng).unwrap();
+        for p in &pairs {
+            let (better, worse) = if p.label == 0 { (p.a.0, p.b.0) } else { (p.b.0, p.a.0) };
+            assert!(better < 2 && worse >= 2);
+        }
+    }
+
+    #[test]
+    fn rank_statistics() {
+        assert!((spearman(&[1.0, 2.0, 3.0], &[10.0, 20.0, 30.0]) - 1.0).abs() < 1e-12);
+        assert!((spearman(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
+        assert_eq!(pairwise_accuracy(&[1.0, 2.0, 3.0], &[1.0, 3.0, 2.0]), 2.0 / 3.0);
+    }
+}

@@ -1,0 +1,23 @@
+//! idrex: reward learning from automatically ranked demonstrations (D-REX, iD-REX).
+//!
+//! Data flow, one module per stage:
+//!
+//! ```text
+//! env ──> demos ──> bc ──> noise rollouts ──> trex ──> ppo ──> evaluation rollouts
+//!                                   ^                                  │
+//!                                   └──────── iD-REX iterations ───────┘
+//! ```
+pub mod algo;
+pub mod bench;
+pub mod cli;
+pub mod data;
+pub mod env;
+pub mod error;
+pub mod log;
+pub mod nn;
+pub mod pipeline;
+pub mod report;
+pub mod rollout;
+pub mod store;
+
+pub use error::{Error, Result};

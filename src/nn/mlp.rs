@@ -1,0 +1,93 @@
+//! A multi-layer perceptron: `(b, in)` -> `(b, out)`, an activation after every layer but the
+//! last.
+use tch::{Tensor, nn, nn::Module};
+
+use super::cpu::MlpCpu;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Activation {
+    Tanh,
+    Relu,
+}
+
+impl Activation {
+    pub fn apply(self, x: &Tensor) -> Tensor {
+        match self {
+            Activation::Tanh => x.tanh(),
+            Activation::Relu => x.relu(),
+        }
+    }
+}
+
+/// Weight initialisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Init {
+    /// libtorch's default (Kaiming-uniform weights, uniform bias), as in the D-REX code.
+    Default,
+    /// Orthogonal weights with gain sqrt(2) on hidden layers and `out_gain` on the output
+    /// layer, zero biases (the PPO implementation details of CleanRL and SB3).
+    Orthogonal { out_gain: f64 },
+}
+
+#[derive(Debug)]
+pub struct Mlp {
+    layers: Vec<nn::Linear>,
+    activation: Activation,
+}
+
+impl Mlp {
+    /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]`, named `l0, l1, ...` under `p`.
+    pub fn new(p: &nn::Path, sizes: &[i64], activation: Activation, init: Init) -> Self {
+        let n = sizes.len() - 1;
+        let layers = (0..n)
+            .map(|i| {
+                let cfg = match init {
+                    Init::Default => nn::LinearConfig::default(),
+                    Init::Orthogonal { out_gain } => nn::LinearConfig {
+                        ws_init: nn::Init::Orthogonal { gain: if i + 1 == n { out_gain } else { 2f64.sqrt() } },
+                        bs_init: Some(nn::Init::Const(0.0)),
+                        bias: true,
+                    },
+                };
+                nn::linear(p / format!("l{i}"), sizes[i], sizes[i + 1], cfg)
+            })
+            .collect();
+        Mlp { layers, activation }
+    }
+
+    /// Sum of squared weights (not biases): the L2 term of the BC and T-REX losses.
+    pub fn weight_l2(&self) -> Tensor {
+        self.layers.iter().map(|l| l.ws.square().sum(tch::Kind::Float)).reduce(|a, b| a + b).expect("an MLP has layers")
+    }
+
+    pub fn to_cpu(&self) -> MlpCpu {
+        let layers = self
+            .layers
+            .iter()
+            .map(|l| {
+                let w: Vec<f32> = Vec::try_from(l.ws.detach().to_kind(tch::Kind::Float).flatten(0, -1)).expect("f32 weights");
+                let b: Vec<f32> = match &l.bs {
+                    Some(b) => Vec::try_from(b.detach().to_kind(tch::Kind::Float)).expect("f32 bias"),
+                    None => vec![0.0; l.ws.size()[0] as usize],
+                };
+                let (out, inp) = (l.ws.size()[0] as usize, l.ws.size()[1] as usize);
+                (w, b, inp, out)
+            })
+            .collect();
+        MlpCpu::new(layers, self.activation)
+    }
+}
+
+impl Module for Mlp {
+    fn forward(&self, x: &Tensor) -> Tensor {
+        let mut h = x.shallow_clone();
+        for (i, l) in self.layers.iter().enumerate() {
+            h = l.forward(&h);
+            if i + 1 < self.layers.len() {
+                h = self.activation.apply(&h);
+            }
+        }
+        h
+    }
+}

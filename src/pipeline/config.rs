@@ -1,0 +1,451 @@
+//! Pipeline files: YAML, schema version 1. Every field is documented in the README; every
+//! mistake is reported with the file, line and column and what to write instead, before
+//! anything runs.
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
+use crate::env::EnvId;
+
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// The methods a pipeline can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    Bc,
+    Drex,
+    IdrexInterpolation,
+    IdrexActionNoise,
+    IdrexMultiBc,
+}
+
+impl Method {
+    pub const ALL: [Method; 5] = [Method::Bc, Method::Drex, Method::IdrexInterpolation, Method::IdrexActionNoise, Method::IdrexMultiBc];
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Bc => "bc",
+            Method::Drex => "drex",
+            Method::IdrexInterpolation => "idrex-interpolation",
+            Method::IdrexActionNoise => "idrex-action-noise",
+            Method::IdrexMultiBc => "idrex-multi-bc",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DemonstratorConfig {
+    /// PPO steps on the ground-truth reward (stopped early at target_return).
+    pub steps: usize,
+    /// Stop once an evaluation reaches this mean return, so the demonstrator stays mediocre.
+    pub target_return: Option<f64>,
+    /// Evaluate (5 episodes) every this many steps to check the target.
+    pub eval_every: usize,
+}
+
+impl Default for DemonstratorConfig {
+    fn default() -> Self {
+        DemonstratorConfig { steps: 200_000, target_return: None, eval_every: 20_480 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DemosConfig {
+    /// Rollouts of the demonstrator's stochastic policy.
+    pub episodes: usize,
+    /// Import instead: an MCAP in idrex's rollout schema or an NPZ with obs, actions,
+    /// rewards, episode_lengths; a path relative to the pipeline file.
+    pub from: Option<PathBuf>,
+}
+
+impl Default for DemosConfig {
+    fn default() -> Self {
+        DemosConfig { episodes: 1, from: None }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    /// Epsilon levels of the D-REX epsilon-greedy schedule.
+    pub schedule: Vec<f64>,
+    pub rollouts_per_level: usize,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalConfig {
+    pub episodes: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        EvalConfig { episodes: 20 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardSettings {
+    /// Control-cost coefficient subtracted from the learned reward (default per environment:
+    /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d).
+    pub ctrl_coeff: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdrexConfig {
+    /// Variant 1: action-selection probabilities alpha of the newer policy.
+    pub alphas: Vec<f64>,
+    /// Variant 2: Gaussian action-noise levels.
+    pub sigmas: Vec<f64>,
+    /// Variant 2: the noise process: gaussian, ou or time-correlated.
+    pub action_noise: String,
+    /// Variants 1 and 2: rollouts per level and per source policy.
+    pub rollouts_per_level: usize,
+    /// Variant 3: epsilon schedule for the clones and rollouts per level (1 in the original).
+    pub multi_bc_schedule: Vec<f64>,
+    pub multi_bc_rollouts_per_level: usize,
+}
+
+impl Default for IdrexConfig {
+    fn default() -> Self {
+        IdrexConfig {
+            alphas: (0..=10).map(|i| i as f64 * 0.1).collect(),
+            sigmas: (0..=10).map(|i| i as f64 * 0.1).collect(),
+            action_noise: "gaussian".into(),
+            rollouts_per_level: 5,
+            multi_bc_schedule: (0..20).map(|i| i as f64 * 0.05).collect(),
+            multi_bc_rollouts_per_level: 1,
+        }
+    }
+}
+
+/// Per-method overrides of the shared stage parameters (any subset of their fields).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MethodOverrides {
+    pub trex: Option<serde_json::Value>,
+    pub ppo: Option<serde_json::Value>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineFile {
+    /// Schema version; must be 1.
+    pub version: u32,
+    /// Names the pipeline in reports (default: the file name).
+    #[serde(default)]
+    pub name: Option<String>,
+    pub env: String,
+    /// Store directory, relative to the pipeline file (default: ./artifacts of the cwd).
+    #[serde(default)]
+    pub store: Option<PathBuf>,
+    /// One RL run per seed (R = len).
+    #[serde(default = "default_seeds")]
+    pub seeds: Vec<u64>,
+    #[serde(default = "default_methods")]
+    pub methods: Vec<Method>,
+    /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting).
+    #[serde(default = "default_iterations")]
+    pub iterations: usize,
+    #[serde(default)]
+    pub demonstrator: DemonstratorConfig,
+    #[serde(default)]
+    pub demos: DemosConfig,
+    #[serde(default)]
+    pub bc: BcConfig,
+    #[serde(default)]
+    pub noise: NoiseConfig,
+    #[serde(default)]
+    pub trex: TrexConfig,
+    #[serde(default)]
+    pub reward: RewardSettings,
+    #[serde(default)]
+    pub ppo: PpoConfig,
+    #[serde(default)]
+    pub eval: EvalConfig,
+    #[serde(default)]
+    pub idrex: IdrexConfig,
+    #[serde(default)]
+    pub overrides: BTreeMap<Method, MethodOverrides>,
+}
+
+fn default_seeds() -> Vec<u64> {
+    vec![0, 1, 2]
+}
+fn default_methods() -> Vec<Method> {
+    Method::ALL.to_vec()
+}
+fn default_iterations() -> usize {
+    2
+}
+
+/// A pipeline mistake, located in its file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConfigError {
+    pub file: PathBuf,
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+}
+
+impl std::fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, self.message)
+    }
+}
+
+/// A validated pipeline with everything resolved.
+#[derive(Debug, Clone)]
+pub struct Pipeline {
+    pub file: PathBuf,
+    pub name: String,
+    pub env: EnvId,
+    pub store: PathBuf,
+    pub spec: PipelineFile,
+    pub ctrl_coeff: f64,
+}
+
+/// Where a key path is in the YAML text: the line and column of its last key, found by
+/// tracking the chain of enclosing keys by indentation; (1, 1) when not found.
+fn locate(text: &str, path: &[&str]) -> (usize, usize) {
+    let mut stack: Vec<(usize, String)> = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim_start();
+        if trimmed.is_empty() || trimmed.starts_with('#') || trimmed.starts_with('-') {
+            continue;
+        }
+        let Some((key, _)) = trimmed.split_once(':') else { continue };
+        let indent = line.len() - trimmed.len();
+        while stack.last().is_some_and(|(d, _)| *d >= indent) {
+            stack.pop();
+        }
+        stack.push((indent, key.trim().to_string()));
+        if stack.len() == path.len() && stack.iter().zip(path).all(|((_, k), p)| k == p) {
+            return (i + 1, indent + 1);
+        }
+    }
+    (1, 1)
+}
+
+impl Pipeline {
+    pub fn load(path: &Path) -> Result<Pipeline, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            file: path.into(),
+            line: 0,
+            column: 0,
+            message: format!("cannot read the pipeline file: {e}"),
+        })?;
+        Self::parse(path, &text)
+    }
+
+    pub fn parse(path: &Path, text: &str) -> Result<Pipeline, ConfigError> {
+        let at = |keys: &[&str], message: String| {
+            let (line, column) = locate(text, keys);
+            ConfigError { file: path.into(), line, column, message }
+        };
+        let spec: PipelineFile = serde_yaml::from_str(text).map_err(|e| {
+            let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
+            let msg = e.to_string();
+            // serde_yaml appends " at line L column C"; we print the location first.
+            let msg = msg.split(" at line ").next().unwrap_or(&msg).to_string();
+            let hint = if msg.contains("unknown field") {
+                "; remove it or fix its spelling (the README lists every field)"
+            } else if msg.contains("invalid type") {
+                "; see the README's schema for the expected type"
+            } else if msg.contains("unknown variant") {
+                "; write one of the names listed"
+            } else {
+                ""
+            };
+            ConfigError { file: path.into(), line, column, message: format!("{msg}{hint}") }
+        })?;
+        if spec.version != SCHEMA_VERSION {
+            return Err(at(&["version"], format!("schema version {} is not supported; write `version: {SCHEMA_VERSION}`", spec.version)));
+        }
+        let env: EnvId = spec.env.parse().map_err(|e: crate::Error| at(&["env"], format!("{e}; write e.g. `env: Hopper-v5`")))?;
+        let positive = |v: usize, keys: &[&str], what: &str| -> Result<(), ConfigError> {
+            if v == 0 { Err(at(keys, format!("{what} must be at least 1"))) } else { Ok(()) }
+        };
+        if spec.seeds.is_empty() {
+            return Err(at(&["seeds"], "seeds is empty; give at least one seed, e.g. `seeds: [0, 1, 2]`".into()));
+        }
+        if spec.methods.is_empty() {
+            return Err(at(
+                &["methods"],
+                "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into(),
+            ));
+        }
+        positive(spec.iterations, &["iterations"], "iterations (K)")?;
+        if spec.demos.from.is_none() {
+            positive(spec.demos.episodes, &["demos", "episodes"], "demos.episodes (or give demos.from)")?;
+            positive(spec.demonstrator.steps, &["demonstrator", "steps"], "demonstrator.steps")?;
+        }
+        positive(spec.bc.iterations, &["bc", "iterations"], "bc.iterations")?;
+        positive(spec.bc.batch_size, &["bc", "batch_size"], "bc.batch_size")?;
+        positive(spec.eval.episodes, &["eval", "episodes"], "eval.episodes")?;
+        positive(spec.noise.rollouts_per_level, &["noise", "rollouts_per_level"], "noise.rollouts_per_level")?;
+        if spec.noise.schedule.is_empty() {
+            return Err(at(
+                &["noise", "schedule"],
+                "the noise schedule is empty; give epsilon levels, e.g. `schedule: [0.0, 0.25, 0.5, 0.75, 1.0]`".into(),
+            ));
+        }
+        if let Some(bad) = spec.noise.schedule.iter().find(|e| !(0.0..=1.0).contains(*e)) {
+            return Err(at(&["noise", "schedule"], format!("epsilon {bad} is outside [0, 1]")));
+        }
+        let span = spec.noise.schedule.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+            - spec.noise.schedule.iter().copied().fold(f64::INFINITY, f64::min);
+        if spec.trex.min_margin > span + 1e-12 {
+            return Err(at(
+                &["trex", "min_margin"],
+                format!(
+                    "min_margin {} is larger than the noise schedule's span {span}, so no pair can be formed; use at most {span}",
+                    spec.trex.min_margin
+                ),
+            ));
+        }
+        positive(spec.trex.models, &["trex", "models"], "trex.models")?;
+        positive(spec.trex.iterations, &["trex", "iterations"], "trex.iterations")?;
+        positive(spec.trex.window, &["trex", "window"], "trex.window")?;
+        positive(spec.trex.pairs_per_model, &["trex", "pairs_per_model"], "trex.pairs_per_model")?;
+        let batch = spec.ppo.num_envs * spec.ppo.num_steps;
+        if spec.ppo.total_steps < batch || batch == 0 {
+            return Err(at(
+                &["ppo", "total_steps"],
+                format!("ppo.total_steps {} is less than one rollout (num_envs x num_steps = {batch})", spec.ppo.total_steps),
+            ));
+        }
+        for (m, o) in &spec.overrides {
+            for (section, value, base) in
+                [("trex", &o.trex, serde_json::to_value(&spec.trex)), ("ppo", &o.ppo, serde_json::to_value(&spec.ppo))]
+            {
+                if let Some(v) = value {
+                    let merged = merge(base.expect("configs serialise"), v);
+                    let ok = match section {
+                        "trex" => serde_json::from_value::<TrexConfig>(merged).map(|_| ()),
+                        _ => serde_json::from_value::<PpoConfig>(merged).map(|_| ()),
+                    };
+                    ok.map_err(|e| at(&["overrides", m.name(), section], format!("overrides.{}.{section}: {e}", m.name())))?;
+                }
+            }
+        }
+        if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
+            return Err(at(&["idrex"], "idrex rollouts per level must be at least 1".into()));
+        }
+        if !["gaussian", "ou", "time-correlated"].contains(&spec.idrex.action_noise.as_str()) {
+            return Err(at(
+                &["idrex", "action_noise"],
+                format!("unknown action noise '{}'; write gaussian, ou or time-correlated", spec.idrex.action_noise),
+            ));
+        }
+        let base = path.parent().unwrap_or(Path::new("."));
+        let store = spec.store.as_ref().map_or_else(|| PathBuf::from("artifacts"), |s| base.join(s));
+        let name = spec.name.clone().unwrap_or_else(|| path.file_stem().map_or("pipeline".into(), |s| s.to_string_lossy().into_owned()));
+        let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(match env {
+            EnvId::HalfCheetah => 0.1,
+            _ => 1e-3,
+        });
+        if let Some(from) = &spec.demos.from {
+            let p = base.join(from);
+            if !p.is_file() {
+                return Err(at(
+                    &["demos", "from"],
+                    format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()),
+                ));
+            }
+        }
+        Ok(Pipeline { file: path.into(), name, env, store, spec, ctrl_coeff })
+    }
+
+    /// The pipeline file's directory, against which relative paths resolve.
+    pub fn base_dir(&self) -> &Path {
+        self.file.parent().unwrap_or(Path::new("."))
+    }
+
+    /// Shared trex/ppo parameters with the method's overrides applied.
+    pub fn trex_for(&self, m: Method) -> TrexConfig {
+        self.with_override(&self.spec.trex, self.spec.overrides.get(&m).and_then(|o| o.trex.as_ref()))
+    }
+    pub fn ppo_for(&self, m: Method) -> PpoConfig {
+        self.with_override(&self.spec.ppo, self.spec.overrides.get(&m).and_then(|o| o.ppo.as_ref()))
+    }
+    fn with_override<T: serde::Serialize + serde::de::DeserializeOwned + Clone>(&self, base: &T, o: Option<&serde_json::Value>) -> T {
+        match o {
+            None => base.clone(),
+            Some(v) => serde_json::from_value(merge(serde_json::to_value(base).expect("serialises"), v)).expect("validated at load"),
+        }
+    }
+}
+
+/// `over` merged into `base`, objects recursively.
+pub fn merge(mut base: serde_json::Value, over: &serde_json::Value) -> serde_json::Value {
+    match (&mut base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                let merged = merge(b.remove(k).unwrap_or(serde_json::Value::Null), v);
+                b.insert(k.clone(), merged);
+            }
+            base
+        }
+        _ => over.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn err(yaml: &str) -> String {
+        Pipeline::parse(Path::new("p.yaml"), yaml).unwrap_err().to_string()
+    }
+
+    const OK: &str = "version: 1\nenv: Hopper-v5\nnoise:\n  schedule: [0.0, 0.5, 1.0]\n";
+
+    #[test]
+    fn a_minimal_file_gets_the_reference_defaults() {
+        let p = Pipeline::parse(Path::new("p.yaml"), OK).unwrap();
+        assert_eq!(p.spec.seeds, vec![0, 1, 2]);
+        assert_eq!(p.spec.bc.iterations, 50_000);
+        assert_eq!(p.spec.trex.window, 50);
+        assert_eq!(p.ctrl_coeff, 1e-3);
+    }
+
+    #[test]
+    fn each_class_of_mistake_has_its_message() {
+        assert_eq!(err("version: 1\nenv: Hopper-v5\nbc:\n  iteratons: 5\n").split(": unknown field").next().unwrap(), "p.yaml:4:3: bc");
+        assert!(err("version: 1\nenv: Hopper-v5\nbc:\n  iteratons: 5\n").contains("remove it or fix its spelling"));
+        assert!(err("version: 1\nenv: Hopper-v5\nseeds: zero\n").contains("p.yaml:3:8: seeds: invalid type"));
+        assert_eq!(
+            err("version: 1\nenv: Hopper-v9\n"),
+            "p.yaml:2:1: unknown environment 'Hopper-v9'; known environments: HalfCheetah-v5, Hopper-v5, Walker2d-v5; write e.g. `env: Hopper-v5`"
+        );
+        assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  total_steps: -5\n").contains("p.yaml:4:16"));
+        assert_eq!(
+            err("version: 1\nenv: Hopper-v5\nnoise:\n  schedule: []\n").split(':').take(3).collect::<Vec<_>>().join(":"),
+            "p.yaml:4:3"
+        );
+        assert!(
+            err("version: 1\nenv: Hopper-v5\nnoise:\n  schedule: [0.0, 0.2]\ntrex:\n  min_margin: 0.3\n")
+                .starts_with("p.yaml:6:3: min_margin 0.3 is larger than the noise schedule's span 0.2")
+        );
+        assert!(err("version: 2\nenv: Hopper-v5\n").contains("write `version: 1`"));
+        assert!(err("version: 1\nenv: Hopper-v5\nmethods: [drex, gail]\n").contains("unknown variant `gail`"));
+        assert!(
+            err("version: 1\nenv: Hopper-v5\ndemos:\n  from: nowhere.npz\n")
+                .contains("p.yaml:4:3: demonstration file nowhere.npz does not exist")
+        );
+        assert!(
+            err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      lr: fast\n").contains("p.yaml:5:5: overrides.drex.ppo")
+        );
+    }
+}

@@ -1,0 +1,285 @@
+//! Executes a graph against a store: cached nodes are reused, the rest run in parallel up to
+//! `jobs` (each with a share of the cores as its thread budget), each under its key's lock
+//! so that concurrent runs on one store compute a node once. A failed node stops its
+//! descendants; the others finish.
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::mpsc;
+use std::time::Instant;
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde_json::Value;
+
+use super::graph::{Graph, Node};
+use super::stages::StageCtx;
+use crate::error::{Error, Result};
+use crate::store::{Manifest, Store, now_unix};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Status {
+    /// Found intact in the store.
+    Cached,
+    Computed {
+        wall_s: f64,
+    },
+    Failed {
+        error: String,
+        log: std::path::PathBuf,
+    },
+    /// Not run because an input failed.
+    Skipped {
+        because: String,
+    },
+}
+
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub node: String,
+    pub key: String,
+    pub status: Status,
+}
+
+pub struct RunOptions {
+    pub jobs: usize,
+    /// Nodes to recompute even if stored.
+    pub force: Vec<String>,
+    pub progress: bool,
+}
+
+pub type StageBody = dyn Fn(&Node, &StageCtx) -> Result<Value> + Sync;
+
+/// Removes staging directories left by processes that no longer exist (killed mid-stage).
+fn clean_stale_staging(store: &Store) {
+    let tmp = store.root().join(".tmp");
+    let Ok(entries) = std::fs::read_dir(&tmp) else { return };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let pid = name.split('.').nth(1).and_then(|p| p.parse::<u32>().ok());
+        if let Some(pid) = pid
+            && pid != std::process::id()
+            && !std::path::Path::new(&format!("/proc/{pid}")).exists()
+        {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
+fn run_node(
+    node: &Node,
+    key: &str,
+    inputs: BTreeMap<String, String>,
+    store: &Store,
+    forced: bool,
+    threads: usize,
+    bar: &ProgressBar,
+    body: &StageBody,
+) -> Status {
+    let attempt = || -> Result<Status> {
+        if !forced && store.lookup(key)?.is_some() {
+            return Ok(Status::Cached);
+        }
+        let _lock = store.lock(key)?;
+        if store.lookup(key)?.is_some() {
+            if !forced {
+                return Ok(Status::Cached); // published by a concurrent run while we waited
+            }
+            std::fs::remove_dir_all(store.dir(key)).map_err(|e| Error::io(store.dir(key), e))?;
+        }
+        let staging = store.stage(key)?;
+        let started = now_unix();
+        let clock = Instant::now();
+        let ctx = StageCtx {
+            params: &node.params,
+            seed: node.seed,
+            inputs: inputs.iter().map(|(role, k)| (role.clone(), store.dir(k))).collect(),
+            out: &staging.dir,
+            threads,
+            progress: bar,
+        };
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(node, &ctx))).unwrap_or_else(|p| {
+            Err(Error::Invalid(format!(
+                "the stage panicked: {}",
+                p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default()
+            )))
+        });
+        let metrics = match result {
+            Ok(m) => m,
+            Err(e) => {
+                let _ = std::fs::remove_dir_all(&staging.dir);
+                return Err(e);
+            }
+        };
+        let wall_s = clock.elapsed().as_secs_f64();
+        let manifest = Manifest {
+            key: key.to_string(),
+            kind: node.kind.name().to_string(),
+            version: node.kind.version(),
+            node: node.name.clone(),
+            params: node.params.clone(),
+            seed: node.seed,
+            inputs,
+            outputs: vec![],
+            metrics,
+            started_unix: started,
+            ended_unix: now_unix(),
+            wall_s,
+            idrex_version: env!("CARGO_PKG_VERSION").to_string(),
+        };
+        store.publish(staging, manifest)?;
+        Ok(Status::Computed { wall_s })
+    };
+    match attempt() {
+        Ok(s) => s,
+        Err(e) => {
+            let logs = store.root().join(".logs");
+            let _ = std::fs::create_dir_all(&logs);
+            let log = logs.join(format!("{}-{}.log", node.name.replace('/', "_"), &key[..12]));
+            let text = format!("node: {}\nkind: {}\nkey: {key}\nparams: {}\nerror: {e}\n", node.name, node.kind.name(), node.params);
+            let _ = std::fs::write(&log, text);
+            Status::Failed { error: e.to_string(), log }
+        }
+    }
+}
+
+pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
+    for f in &opts.force {
+        if graph.get(f).is_none() {
+            let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
+            return Err(Error::Invalid(format!("--force {f}: no such node; the nodes are {}", names.join(", "))));
+        }
+    }
+    clean_stale_staging(store);
+    let keys = graph.keys();
+    let jobs = opts.jobs.max(1);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = (cores / jobs).max(1);
+    let multi = MultiProgress::with_draw_target(if opts.progress { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() });
+    let overall = multi.add(ProgressBar::new(graph.nodes.len() as u64));
+    overall.set_style(ProgressStyle::with_template("[{elapsed_precise}] {bar:30} {pos}/{len} stages {msg}").expect("template"));
+    let stage_style = ProgressStyle::with_template("  {spinner} {prefix:<36} {bar:20} {pos}/{len} {msg}").expect("template");
+
+    let mut status: BTreeMap<String, Status> = BTreeMap::new();
+    let mut running: BTreeSet<String> = BTreeSet::new();
+    let (tx, rx) = mpsc::channel::<(String, Status)>();
+    std::thread::scope(|scope| {
+        loop {
+            // Skip the descendants of failures.
+            for n in &graph.nodes {
+                if status.contains_key(&n.name) {
+                    continue;
+                }
+                if let Some((_, bad)) =
+                    n.inputs.iter().find(|(_, i)| matches!(status.get(i), Some(Status::Failed { .. } | Status::Skipped { .. })))
+                {
+                    status.insert(n.name.clone(), Status::Skipped { because: bad.clone() });
+                    overall.inc(1);
+                }
+            }
+            let ready: Vec<&Node> = graph
+                .nodes
+                .iter()
+                .filter(|n| !status.contains_key(&n.name) && !running.contains(&n.name))
+                .filter(|n| n.inputs.iter().all(|(_, i)| matches!(status.get(i), Some(Status::Cached | Status::Computed { .. }))))
+                .collect();
+            for n in ready.into_iter().take(jobs.saturating_sub(running.len())) {
+                running.insert(n.name.clone());
+                let key = keys[&n.name].clone();
+                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
+                let forced = opts.force.contains(&n.name);
+                let bar = multi.insert_before(&overall, ProgressBar::new(0));
+                bar.set_style(stage_style.clone());
+                bar.set_prefix(n.name.clone());
+                bar.enable_steady_tick(std::time::Duration::from_millis(200));
+                let tx = tx.clone();
+                scope.spawn(move || {
+                    let s = run_node(n, &key, inputs, store, forced, threads, &bar, body);
+                    bar.finish_and_clear();
+                    let _ = tx.send((n.name.clone(), s));
+                });
+            }
+            if running.is_empty() {
+                break;
+            }
+            let (name, s) = rx.recv().expect("a worker reports before it exits");
+            running.remove(&name);
+            if let Status::Failed { error, .. } = &s {
+                overall.println(format!("failed: {name}: {error}"));
+            }
+            overall.inc(1);
+            status.insert(name, s);
+        }
+    });
+    overall.finish_and_clear();
+    Ok(graph
+        .nodes
+        .iter()
+        .map(|n| Outcome { node: n.name.clone(), key: keys[&n.name].clone(), status: status.remove(&n.name).expect("every node ends") })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::stages::{self, StageKind};
+    use serde_json::json;
+
+    fn node(name: &str, value: i64, inputs: &[&str], extra: Value) -> Node {
+        let mut params = json!({"value": value});
+        for (k, v) in extra.as_object().into_iter().flatten() {
+            params[k] = v.clone();
+        }
+        Node {
+            name: name.into(),
+            kind: StageKind::TestValue,
+            params,
+            seed: 0,
+            inputs: inputs.iter().enumerate().map(|(i, s)| (format!("in{i}"), s.to_string())).collect(),
+        }
+    }
+
+    fn body(n: &Node, ctx: &StageCtx) -> Result<Value> {
+        stages::run(n.kind, ctx)
+    }
+
+    fn opts(force: &[&str]) -> RunOptions {
+        RunOptions { jobs: 2, force: force.iter().map(|s| s.to_string()).collect(), progress: false }
+    }
+
+    fn value(store: &Store, o: &Outcome) -> String {
+        std::fs::read_to_string(store.dir(&o.key).join("value.txt")).unwrap()
+    }
+
+    #[test]
+    fn caches_recomputes_forced_nodes_and_stops_descendants_of_failures() {
+        let root = std::env::temp_dir().join(format!("idrex-runner-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let store = Store::open(&root).unwrap();
+        let g = Graph {
+            nodes: vec![
+                node("a", 1, &[], json!({})),
+                node("b", 10, &["a"], json!({"sleep_ms": 50})),
+                node("c", 100, &["a"], json!({"sleep_ms": 50})),
+                node("d", 1000, &["b", "c"], json!({})),
+            ],
+        };
+        let out = run(&g, &store, &opts(&[]), &body).unwrap();
+        assert!(out.iter().all(|o| matches!(o.status, Status::Computed { .. })));
+        assert_eq!(value(&store, &out[3]), "1112");
+        let again = run(&g, &store, &opts(&[]), &body).unwrap();
+        assert!(again.iter().all(|o| o.status == Status::Cached));
+        let forced = run(&g, &store, &opts(&["c"]), &body).unwrap();
+        let computed: Vec<&str> = forced.iter().filter(|o| matches!(o.status, Status::Computed { .. })).map(|o| o.node.as_str()).collect();
+        assert_eq!(computed, vec!["c"]);
+        assert!(run(&g, &store, &opts(&["nope"]), &body).unwrap_err().to_string().contains("no such node"));
+
+        // A failing stage: its descendants are skipped, its siblings finish, its log exists.
+        let mut bad = g.clone();
+        bad.nodes[1] = node("b", 11, &["a"], json!({"fail": true}));
+        bad.nodes[2] = node("c", 101, &["a"], json!({}));
+        let out = run(&bad, &store, &opts(&[]), &body).unwrap();
+        assert!(matches!(&out[1].status, Status::Failed { log, .. } if log.exists()));
+        assert!(matches!(out[2].status, Status::Computed { .. }));
+        assert_eq!(out[3].status, Status::Skipped { because: "b".into() });
+        assert!(!store.dir(&out[1].key).exists(), "nothing of the failed stage is published");
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}

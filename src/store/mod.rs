@@ -1,0 +1,317 @@
+//! The artifact store: one directory per stage result, named by its key.
+//!
+//! A key is the sha256 of a canonical JSON encoding (sorted keys) of the stage kind, the
+//! stage's implementation version, its resolved parameters, its seed and the keys of its
+//! inputs ([`key`]). An artifact directory holds the stage's outputs and `manifest.json`
+//! (every output's sha256 and size, metrics, times, idrex version).
+//!
+//! Publishing is atomic: a stage writes into `.tmp/<key>.<pid>.<n>` on the same filesystem,
+//! every file and the directory are fsynced, then the directory is renamed to `<key>`. A
+//! crash at any moment leaves at most a stray `.tmp` entry, never a partial `<key>`. A
+//! per-key lock (`.locks/<key>.lock`, an OS file lock, released when the process dies) lets
+//! two runs share a store: the second waits, then finds the artifact published. An artifact
+//! whose files no longer match its manifest is corrupt: it is moved to `.corrupt/` and
+//! recomputed, never used.
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+
+pub const MANIFEST: &str = "manifest.json";
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct OutputFile {
+    pub path: String,
+    pub sha256: String,
+    pub size: u64,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Manifest {
+    pub key: String,
+    pub kind: String,
+    pub version: u32,
+    /// The pipeline node this artifact was computed for (not part of the key).
+    pub node: String,
+    pub params: serde_json::Value,
+    pub seed: u64,
+    /// Input role -> key.
+    pub inputs: BTreeMap<String, String>,
+    pub outputs: Vec<OutputFile>,
+    pub metrics: serde_json::Value,
+    pub started_unix: f64,
+    pub ended_unix: f64,
+    pub wall_s: f64,
+    pub idrex_version: String,
+}
+
+/// The key of a stage instance.
+pub fn key(kind: &str, version: u32, params: &serde_json::Value, seed: u64, inputs: &BTreeMap<String, String>) -> String {
+    // serde_json's Map is a BTreeMap (no preserve_order feature): keys serialise sorted.
+    let canonical = serde_json::json!({
+        "kind": kind, "version": version, "params": params, "seed": seed, "inputs": inputs,
+    });
+    hex(&Sha256::digest(canonical.to_string().as_bytes()))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+pub fn sha256_file(path: &Path) -> Result<(String, u64)> {
+    let mut f = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut h = Sha256::new();
+    let mut buf = vec![0u8; 1 << 16];
+    let mut size = 0u64;
+    loop {
+        let n = f.read(&mut buf).map_err(|e| Error::io(path, e))?;
+        if n == 0 {
+            break;
+        }
+        size += n as u64;
+        h.update(&buf[..n]);
+    }
+    Ok((hex(&h.finalize()), size))
+}
+
+pub fn now_unix() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
+#[derive(Debug, Clone)]
+pub struct Store {
+    root: PathBuf,
+}
+
+/// Holds a key's lock until dropped.
+pub struct KeyLock {
+    _file: File,
+}
+
+/// A stage's output directory before publication.
+pub struct Staging {
+    pub dir: PathBuf,
+    key: String,
+}
+
+static STAGING_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+impl Store {
+    pub fn open(root: impl Into<PathBuf>) -> Result<Self> {
+        let root = root.into();
+        for sub in [".tmp", ".locks"] {
+            let d = root.join(sub);
+            std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+        }
+        Ok(Store { root })
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    pub fn dir(&self, key: &str) -> PathBuf {
+        self.root.join(key)
+    }
+
+    /// Blocks until this process holds `key`'s lock.
+    pub fn lock(&self, key: &str) -> Result<KeyLock> {
+        let path = self.root.join(".locks").join(format!("{key}.lock"));
+        let file = File::options().create(true).truncate(false).write(true).open(&path).map_err(|e| Error::io(&path, e))?;
+        file.lock().map_err(|e| Error::io(&path, e))?;
+        Ok(KeyLock { _file: file })
+    }
+
+    /// The manifest of `key` if it is published and intact. A corrupt artifact is moved to
+    /// `.corrupt/` (so that it is recomputed) and reported as absent.
+    pub fn lookup(&self, key: &str) -> Result<Option<Manifest>> {
+        if !self.dir(key).exists() {
+            return Ok(None);
+        }
+        match self.check(key) {
+            Ok(m) => Ok(Some(m)),
+            Err(problem) => {
+                tracing::warn!("artifact {key} is corrupt ({problem}); recomputing it");
+                self.quarantine(key)?;
+                Ok(None)
+            }
+        }
+    }
+
+    /// Checks an artifact against its manifest; the error says what is wrong.
+    pub fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
+        let dir = self.dir(key);
+        let text = std::fs::read_to_string(dir.join(MANIFEST)).map_err(|e| format!("{MANIFEST}: {e}"))?;
+        let m: Manifest = serde_json::from_str(&text).map_err(|e| format!("{MANIFEST}: {e}"))?;
+        if m.key != key {
+            return Err(format!("{MANIFEST} names key {}", m.key));
+        }
+        for o in &m.outputs {
+            let (sha, size) = sha256_file(&dir.join(&o.path)).map_err(|e| e.to_string())?;
+            if size != o.size || sha != o.sha256 {
+                return Err(format!("{} does not match its recorded sha256 and size", o.path));
+            }
+        }
+        Ok(m)
+    }
+
+    fn quarantine(&self, key: &str) -> Result<()> {
+        let bad = self.root.join(".corrupt");
+        std::fs::create_dir_all(&bad).map_err(|e| Error::io(&bad, e))?;
+        let to = bad.join(format!("{key}.{}", now_unix() as u64));
+        std::fs::rename(self.dir(key), &to).map_err(|e| Error::io(self.dir(key), e))
+    }
+
+    /// A fresh, empty staging directory for `key`.
+    pub fn stage(&self, key: &str) -> Result<Staging> {
+        let n = STAGING_COUNTER.fetch_add(1, Ordering::Relaxed);
+        let dir = self.root.join(".tmp").join(format!("{key}.{}.{n}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        Ok(Staging { dir, key: key.to_string() })
+    }
+
+    /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place.
+    /// The caller holds the key's lock.
+    pub fn publish(&self, staging: Staging, mut manifest: Manifest) -> Result<Manifest> {
+        manifest.key = staging.key.clone();
+        manifest.outputs.clear();
+        let mut files: Vec<PathBuf> = walkdir::WalkDir::new(&staging.dir)
+            .into_iter()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_type().is_file())
+            .map(|e| e.into_path())
+            .collect();
+        files.sort();
+        for f in &files {
+            let rel = f.strip_prefix(&staging.dir).expect("under the staging dir").to_string_lossy().into_owned();
+            if rel == MANIFEST {
+                continue;
+            }
+            let (sha256, size) = sha256_file(f)?;
+            manifest.outputs.push(OutputFile { path: rel, sha256, size });
+            File::open(f).and_then(|h| h.sync_all()).map_err(|e| Error::io(f, e))?;
+        }
+        let mpath = staging.dir.join(MANIFEST);
+        let text = serde_json::to_string_pretty(&manifest).expect("a manifest serialises");
+        std::fs::write(&mpath, text + "\n").map_err(|e| Error::io(&mpath, e))?;
+        File::open(&mpath).and_then(|h| h.sync_all()).map_err(|e| Error::io(&mpath, e))?;
+        for d in walkdir::WalkDir::new(&staging.dir).into_iter().filter_map(|e| e.ok()).filter(|e| e.file_type().is_dir()) {
+            File::open(d.path()).and_then(|h| h.sync_all()).map_err(|e| Error::io(d.path(), e))?;
+        }
+        let dest = self.dir(&staging.key);
+        if dest.exists() {
+            // Published by someone else meanwhile (only possible without the lock); keep theirs.
+            let _ = std::fs::remove_dir_all(&staging.dir);
+        } else {
+            std::fs::rename(&staging.dir, &dest).map_err(|e| Error::io(&dest, e))?;
+            File::open(&self.root).and_then(|h| h.sync_all()).map_err(|e| Error::io(&self.root, e))?;
+        }
+        Ok(manifest)
+    }
+
+    /// Every published artifact's key.
+    pub fn keys(&self) -> Result<Vec<String>> {
+        let mut keys = Vec::new();
+        for e in std::fs::read_dir(&self.root).map_err(|e| Error::io(&self.root, e))? {
+            let e = e.map_err(|e| Error::io(&self.root, e))?;
+            let name = e.file_name().to_string_lossy().into_owned();
+            if !name.starts_with('.') && e.path().is_dir() {
+                keys.push(name);
+            }
+        }
+        keys.sort();
+        Ok(keys)
+    }
+
+    /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
+    pub fn manifests(&self) -> Result<Vec<Manifest>> {
+        Ok(self.keys()?.iter().filter_map(|k| self.check(k).ok()).collect())
+    }
+
+    /// Re-hashes every artifact; returns (key, problem) for each corrupt one.
+    pub fn verify(&self) -> Result<Vec<(String, String)>> {
+        Ok(self.keys()?.into_iter().filter_map(|k| self.check(&k).err().map(|p| (k, p))).collect())
+    }
+
+    /// Removes every artifact not in `keep` (and stale staging entries); returns what was
+    /// (or, with `dry_run`, would be) removed.
+    pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        let mut removed = Vec::new();
+        for k in self.keys()? {
+            if !keep.contains(&k) {
+                if !dry_run {
+                    let _lock = self.lock(&k)?;
+                    std::fs::remove_dir_all(self.dir(&k)).map_err(|e| Error::io(self.dir(&k), e))?;
+                }
+                removed.push(k);
+            }
+        }
+        Ok(removed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn manifest(kind: &str) -> Manifest {
+        Manifest {
+            key: String::new(),
+            kind: kind.into(),
+            version: 1,
+            node: "n".into(),
+            params: serde_json::json!({}),
+            seed: 0,
+            inputs: BTreeMap::new(),
+            outputs: vec![],
+            metrics: serde_json::json!({}),
+            started_unix: 0.0,
+            ended_unix: 0.0,
+            wall_s: 0.0,
+            idrex_version: "test".into(),
+        }
+    }
+
+    #[test]
+    fn keys_are_canonical_and_sensitive_to_every_part() {
+        let p1: serde_json::Value = serde_json::from_str(r#"{"a": 1, "b": [1.5, 2]}"#).unwrap();
+        let p2: serde_json::Value = serde_json::from_str(r#"{"b": [1.5, 2], "a": 1}"#).unwrap();
+        let none = BTreeMap::new();
+        let base = key("bc", 1, &p1, 0, &none);
+        assert_eq!(base, key("bc", 1, &p2, 0, &none), "key order does not matter");
+        assert_ne!(base, key("bc", 2, &p1, 0, &none));
+        assert_ne!(base, key("ppo", 1, &p1, 0, &none));
+        assert_ne!(base, key("bc", 1, &p1, 1, &none));
+        let inputs: BTreeMap<String, String> = [("demos".to_string(), "abc".to_string())].into();
+        assert_ne!(base, key("bc", 1, &p1, 0, &inputs));
+    }
+
+    #[test]
+    fn publish_verify_and_quarantine() {
+        let root = std::env::temp_dir().join(format!("idrex-store-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let store = Store::open(&root).unwrap();
+        let k = key("t", 1, &serde_json::json!({}), 0, &BTreeMap::new());
+        let _lock = store.lock(&k).unwrap();
+        let s = store.stage(&k).unwrap();
+        std::fs::write(s.dir.join("out.txt"), "hello").unwrap();
+        let m = store.publish(s, manifest("t")).unwrap();
+        assert_eq!(m.outputs.len(), 1);
+        assert_eq!(store.lookup(&k).unwrap().unwrap().outputs[0].size, 5);
+        assert!(store.verify().unwrap().is_empty());
+        // Flip a byte: verify reports it, lookup moves it aside.
+        std::fs::write(store.dir(&k).join("out.txt"), "hellO").unwrap();
+        let bad = store.verify().unwrap();
+        assert_eq!(bad.len(), 1);
+        assert!(bad[0].1.contains("out.txt"), "{bad:?}");
+        assert!(store.lookup(&k).unwrap().is_none());
+        assert!(!store.dir(&k).exists());
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+}

@@ -1,0 +1,232 @@
+//! The pipeline engine end to end on pipelines/smoke.yaml (every method, real MuJoCo, tiny
+//! budgets): outputs checked with the tools users use (Python's mcap reader, `rerun rrd
+//! verify`, Python's csv module), caching, crash safety, concurrency and corruption.
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use crate::util::{TempDir, idrex, python, repo, stderr, stdout};
+
+fn run_smoke(store: &Path, rec: &Path) -> std::process::Output {
+    let smoke = repo("pipelines/smoke.yaml");
+    idrex(&["pipeline", "run", smoke.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()])
+}
+
+fn computed(out: &std::process::Output) -> usize {
+    let s = stdout(out);
+    let line = s.lines().find(|l| l.contains(" computed")).unwrap_or_else(|| panic!("no summary in: {s}"));
+    line.split(", ").find_map(|p| p.strip_suffix(" computed")).unwrap().trim().parse().unwrap()
+}
+
+fn artifact_dirs(store: &Path) -> Vec<std::path::PathBuf> {
+    std::fs::read_dir(store)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_dir() && !p.file_name().unwrap().to_string_lossy().starts_with('.'))
+        .collect()
+}
+
+fn py(code: &str, args: &[&str]) -> String {
+    let out = Command::new(python()).arg("-c").arg(code).args(args).output().unwrap();
+    assert!(out.status.success(), "python failed: {}", stderr(&out));
+    stdout(&out)
+}
+
+#[test]
+fn smoke_pipeline_end_to_end() {
+    let dir = TempDir::new("smoke");
+    let (store, rec) = (dir.join("store"), dir.join("smoke.rrd"));
+    let first = run_smoke(&store, &rec);
+    assert!(first.status.success(), "{}\n{}", stdout(&first), stderr(&first));
+    let total = computed(&first);
+    assert!(total >= 20, "every method's stages ran: {}", stdout(&first));
+
+    // Re-running recomputes nothing.
+    let again = run_smoke(&store, &rec);
+    assert!(again.status.success());
+    assert_eq!(computed(&again), 0, "{}", stdout(&again));
+
+    // The recording passes rerun's own verifier.
+    let rerun = Path::new(&python()).with_file_name("rerun");
+    let v = Command::new(&rerun).args(["rrd", "verify", rec.to_str().unwrap()]).output().unwrap();
+    assert!(v.status.success(), "rerun rrd verify: {}{}", stdout(&v), stderr(&v));
+
+    // Every rollout file opens in Python's mcap reader with monotonic log times.
+    let mcaps: Vec<_> = walk(&store).into_iter().filter(|p| p.extension().is_some_and(|e| e == "mcap")).collect();
+    assert!(mcaps.len() >= 10);
+    let check = r#"
+import json, sys
+from mcap.reader import make_reader
+for path in sys.argv[1:]:
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        last, n, schemas = 0, 0, set()
+        for schema, channel, msg in r.iter_messages():
+            assert msg.log_time > last, (path, msg.log_time, last)
+            last = msg.log_time
+            schemas.add(schema.encoding)
+            json.loads(msg.data)
+            n += 1
+        meta = {m.name: m.metadata for m in r.iter_metadata()}
+        assert schemas <= {"jsonschema"}, schemas
+        assert meta["idrex.rollout"]["format"] == "idrex-rollout/1"
+        # Empty only where every episode was filtered out (multi-BC's clone filter).
+        assert n > 0 or meta["idrex.rollout"]["episodes"] == "0", path
+print("ok", len(sys.argv) - 1)
+"#;
+    let args: Vec<&str> = mcaps.iter().map(|p| p.to_str().unwrap()).collect();
+    assert!(py(check, &args).starts_with("ok"));
+
+    // The report: CSV that Python's csv module reads, markdown with every method.
+    let out_dir = dir.join("report");
+    let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", out_dir.to_str().unwrap()]);
+    assert!(rep.status.success(), "{}", stderr(&rep));
+    let md = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
+    assert!(md.contains("| Hopper-v5 | smoke |"), "{md}");
+    assert!(!md.contains("missing"), "every method has results: {md}");
+    let csv_check = r#"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+methods = {r["method"] for r in rows}
+assert methods == {"bc", "drex", "idrex-interpolation", "idrex-action-noise", "idrex-multi-bc"}, methods
+for r in rows:
+    float(r["mean"]); float(r["best_run_avg"])
+print("ok")
+"#;
+    assert_eq!(py(csv_check, &[out_dir.join("returns.csv").to_str().unwrap()]).trim(), "ok");
+
+    // A flipped byte: verify reports it, a run recomputes exactly that artifact.
+    let victim = mcaps[0].clone();
+    let mut bytes = std::fs::read(&victim).unwrap();
+    bytes[100] ^= 0xff;
+    std::fs::write(&victim, bytes).unwrap();
+    let v = idrex(&["verify", "--store", store.to_str().unwrap()]);
+    assert!(!v.status.success());
+    assert!(stdout(&v).contains("1 corrupt"), "{}", stdout(&v));
+    let healed = run_smoke(&store, &rec);
+    assert!(healed.status.success(), "{}", stderr(&healed));
+    assert_eq!(computed(&healed), 1, "{}", stdout(&healed));
+    assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
+
+    // logs: list and export reopen our files.
+    let l = idrex(&["logs", "list", mcaps[1].to_str().unwrap()]);
+    assert!(l.status.success() && stdout(&l).contains("episodes of Hopper-v5"), "{}", stderr(&l));
+    let csv_out = dir.join("steps.csv");
+    let e = idrex(&["logs", "export", mcaps[1].to_str().unwrap(), "--format", "csv", "--out", csv_out.to_str().unwrap()]);
+    assert!(e.status.success(), "{}", stderr(&e));
+    let n = py("import csv,sys; print(len(list(csv.DictReader(open(sys.argv[1])))))", &[csv_out.to_str().unwrap()]);
+    assert!(n.trim().parse::<usize>().unwrap() > 0);
+}
+
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.file_name().unwrap().to_string_lossy().starts_with('.') {
+            continue;
+        }
+        if p.is_dir() { out.extend(walk(&p)) } else { out.push(p) }
+    }
+    out
+}
+
+#[test]
+fn kill_minus_nine_leaves_nothing_partial_and_the_rerun_reuses_finished_work() {
+    let dir = TempDir::new("kill");
+    let store = dir.join("store");
+    let smoke = repo("pipelines/smoke.yaml");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
+        .args([
+            "pipeline",
+            "run",
+            smoke.to_str().unwrap(),
+            "--store",
+            store.to_str().unwrap(),
+            "--recording",
+            dir.join("r.rrd").to_str().unwrap(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until a few artifacts are published and more are being computed, then kill.
+    let start = std::time::Instant::now();
+    while (!store.exists() || artifact_dirs(&store).len() < 4) && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    unsafe { libc_kill(child.id() as i32, 9) };
+    child.wait().unwrap();
+    let published = artifact_dirs(&store);
+    assert!(!published.is_empty());
+    // Every published artifact is complete; staging leftovers are never trusted.
+    let v = idrex(&["verify", "--store", store.to_str().unwrap()]);
+    assert!(v.status.success(), "{}", stdout(&v));
+    let rerun = run_smoke(&store, &dir.join("r.rrd"));
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    let fresh = TempDir::new("kill-fresh");
+    let full = computed(&run_smoke(&fresh.join("store"), &fresh.join("r.rrd")));
+    assert_eq!(computed(&rerun) + published.len(), full, "finished nodes were reused, the rest computed once");
+}
+
+unsafe extern "C" {
+    #[link_name = "kill"]
+    fn libc_kill(pid: i32, sig: i32) -> i32;
+}
+
+#[test]
+fn two_concurrent_runs_share_one_store() {
+    let dir = TempDir::new("concurrent");
+    let store = dir.join("store");
+    let smoke = repo("pipelines/smoke.yaml");
+    let spawn = |rec: &str| {
+        Command::new(env!("CARGO_BIN_EXE_idrex"))
+            .args([
+                "pipeline",
+                "run",
+                smoke.to_str().unwrap(),
+                "--store",
+                store.to_str().unwrap(),
+                "--jobs",
+                "1",
+                "--recording",
+                dir.join(rec).to_str().unwrap(),
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    let (a, b) = (spawn("a.rrd"), spawn("b.rrd"));
+    let (a, b) = (a.wait_with_output().unwrap(), b.wait_with_output().unwrap());
+    assert!(a.status.success() && b.status.success(), "{}{}", stderr(&a), stderr(&b));
+    // Each node was computed by exactly one of them; the other reused it.
+    assert_eq!(computed(&a) + computed(&b), artifact_dirs(&store).len(), "{}\n{}", stdout(&a), stdout(&b));
+    assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
+}
+
+#[test]
+fn a_bad_pipeline_file_runs_nothing() {
+    let dir = TempDir::new("badyaml");
+    std::fs::write(dir.join("p.yaml"), "version: 1\nenv: Hopper-v5\nppo:\n  total_stepz: 10\n").unwrap();
+    let out = idrex(&["pipeline", "run", dir.join("p.yaml").to_str().unwrap(), "--store", dir.join("store").to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("p.yaml:4:3: ppo: unknown field `total_stepz`"), "{}", stderr(&out));
+    assert!(!dir.join("store").exists(), "nothing ran, not even the store was created");
+}
+
+#[test]
+fn changing_one_parameter_invalidates_exactly_its_descendants() {
+    use idrex::pipeline::{Pipeline, expand};
+    let text = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
+    let base = Pipeline::parse(&repo("pipelines/smoke.yaml"), &text).unwrap();
+    let changed = Pipeline::parse(&repo("pipelines/smoke.yaml"), &text.replace("  iterations: 100\n", "  iterations: 101\n")).unwrap();
+    let (g, k1, k2) = (expand(&base).unwrap(), expand(&base).unwrap().keys(), expand(&changed).unwrap().keys());
+    let differ: Vec<&String> = k1.keys().filter(|n| k1[*n] != k2[*n]).collect();
+    let mut expected: Vec<String> = g.nodes.iter().filter(|n| n.name.ends_with("/trex")).flat_map(|n| g.descendants(&n.name)).collect();
+    expected.sort();
+    expected.dedup();
+    let mut differ: Vec<String> = differ.into_iter().cloned().collect();
+    differ.sort();
+    assert_eq!(differ, expected);
+    assert!(!differ.contains(&"bc".to_string()) && !differ.contains(&"drex/noise".to_string()));
+}

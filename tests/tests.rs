@@ -1,0 +1,6 @@
+//! Integration tests: one binary (linking libtorch once), one module per topic.
+mod util;
+
+mod env_cli;
+mod env_equivalence;
+mod pipeline;
