@@ -2,4 +2,5 @@
 pub mod bc;
 pub mod noise;
 pub mod ppo;
+pub mod ppo_fused;
 pub mod trex;

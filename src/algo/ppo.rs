@@ -17,6 +17,7 @@ use rand_chacha::ChaCha8Rng;
 use tch::{Kind, Tensor, nn::OptimizerConfig};
 
 use crate::algo::noise::PolicyActor;
+use crate::algo::ppo_fused::{Fused, LossConfig};
 use crate::data::{RunningMeanStd, TrajMeta};
 use crate::env::{Env, EnvId, VecEnv};
 use crate::error::Result;
@@ -52,6 +53,16 @@ pub struct PpoConfig {
     /// Evaluate (stochastic policy, ground-truth reward) every this many steps; 0: never.
     pub eval_every: usize,
     pub eval_episodes: usize,
+    /// Where the minibatch updates run: `fused` (plain Rust, see ppo_fused.rs) or `tch`
+    /// (libtorch autograd). Both compute the same loss; fused is several times faster.
+    pub backend: Backend,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    Fused,
+    Tch,
 }
 
 impl Default for PpoConfig {
@@ -79,6 +90,7 @@ impl Default for PpoConfig {
             threads: 1,
             eval_every: 0,
             eval_episodes: 5,
+            backend: Backend::Fused,
         }
     }
 }
@@ -158,6 +170,14 @@ pub fn train(
     let mut ret_rms = RunningMeanStd::new(1);
     let mut disc_ret = vec![0.0f64; n];
     let mut opt = tch::nn::Adam { eps: 1e-5, ..Default::default() }.build(&agent.vs, cfg.lr)?;
+    let mut fused = (cfg.backend == Backend::Fused).then(|| Fused::from_agent(&agent));
+    let loss_cfg = LossConfig {
+        clip_coef: cfg.clip_coef as f32,
+        clip_vloss: cfg.clip_vloss,
+        ent_coef: cfg.ent_coef as f32,
+        vf_coef: cfg.vf_coef as f32,
+        norm_adv: cfg.norm_adv,
+    };
 
     let batch = n * t_len;
     let minibatch = (batch / cfg.num_minibatches).max(1);
@@ -185,9 +205,8 @@ pub fn train(
 
     for update in 1..=updates {
         let upd_start = Instant::now();
-        if cfg.anneal_lr {
-            opt.set_lr(cfg.lr * (1.0 - (update - 1) as f64 / updates as f64));
-        }
+        let lr = if cfg.anneal_lr { cfg.lr * (1.0 - (update - 1) as f64 / updates as f64) } else { cfg.lr };
+        opt.set_lr(lr);
         agent.obs_norm = Some(obs_rms.clone());
         let cpu = agent.to_cpu();
         buf.truncations.clear();
@@ -272,51 +291,79 @@ pub fn train(
         }
         let returns: Vec<f32> = adv.iter().zip(&buf.values).map(|(a, v)| a + v).collect();
         // ---- update ----
-        let b_obs = Tensor::from_slice(&buf.nobs).view([batch as i64, od as i64]);
-        let b_act = Tensor::from_slice(&buf.actions).view([batch as i64, ad as i64]);
-        let b_logp = Tensor::from_slice(&buf.logp);
-        let b_adv = Tensor::from_slice(&adv);
-        let b_ret = Tensor::from_slice(&returns);
-        let b_val = Tensor::from_slice(&buf.values);
-        let mut idx: Vec<i64> = (0..batch as i64).collect();
         let (mut pg_l, mut v_l, mut ent_l, mut kl, mut clipfracs) = (0.0, 0.0, 0.0, 0.0, Vec::new());
-        for _epoch in 0..cfg.update_epochs {
-            idx.shuffle(&mut rng);
-            for mb in idx.chunks(minibatch) {
-                let mbi = Tensor::from_slice(mb);
-                let (new_logp, entropy) = agent.log_prob_entropy(&b_obs.index_select(0, &mbi), &b_act.index_select(0, &mbi));
-                let new_v = agent.value(&b_obs.index_select(0, &mbi));
-                let logratio = &new_logp - b_logp.index_select(0, &mbi);
-                let ratio = logratio.exp();
-                tch::no_grad(|| {
-                    kl = ((&ratio - 1.0) - &logratio).mean(Kind::Float).double_value(&[]);
-                    clipfracs.push((&ratio - 1.0).abs().gt(cfg.clip_coef).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]));
-                });
-                let mut mb_adv = b_adv.index_select(0, &mbi);
-                if cfg.norm_adv {
-                    mb_adv = (&mb_adv - mb_adv.mean(Kind::Float)) / (mb_adv.std(true) + 1e-8);
+        let mut idx: Vec<i64> = (0..batch as i64).collect();
+        if let Some(f) = &mut fused {
+            let gather = |src: &[f32], d: usize, mb: &[i64]| -> Vec<f32> {
+                let mut v = Vec::with_capacity(mb.len() * d);
+                for &k in mb {
+                    v.extend_from_slice(&src[k as usize * d..(k as usize + 1) * d]);
                 }
-                let pg1 = -&mb_adv * &ratio;
-                let pg2 = -&mb_adv * ratio.clamp(1.0 - cfg.clip_coef, 1.0 + cfg.clip_coef);
-                let pg_loss = pg1.maximum(&pg2).mean(Kind::Float);
-                let mb_ret = b_ret.index_select(0, &mbi);
-                let v_loss: Tensor = if cfg.clip_vloss {
-                    let mb_val = b_val.index_select(0, &mbi);
-                    let unclipped = (&new_v - &mb_ret).square();
-                    let clipped = (&mb_val + (&new_v - &mb_val).clamp(-cfg.clip_coef, cfg.clip_coef) - &mb_ret).square();
-                    unclipped.maximum(&clipped).mean(Kind::Float) * 0.5
-                } else {
-                    (&new_v - &mb_ret).square().mean(Kind::Float) * 0.5
-                };
-                let ent = entropy.mean(Kind::Float);
-                let loss: Tensor = &pg_loss - &ent * cfg.ent_coef + &v_loss * cfg.vf_coef;
-                opt.zero_grad();
-                loss.backward();
-                opt.clip_grad_norm(cfg.max_grad_norm);
-                opt.step();
-                pg_l = pg_loss.double_value(&[]);
-                v_l = v_loss.double_value(&[]);
-                ent_l = ent.double_value(&[]);
+                v
+            };
+            for _epoch in 0..cfg.update_epochs {
+                idx.shuffle(&mut rng);
+                for mb in idx.chunks(minibatch) {
+                    let st = f.loss_and_grad(
+                        &gather(&buf.nobs, od, mb),
+                        &gather(&buf.actions, ad, mb),
+                        &gather(&buf.logp, 1, mb),
+                        &gather(&adv, 1, mb),
+                        &gather(&returns, 1, mb),
+                        &gather(&buf.values, 1, mb),
+                        loss_cfg,
+                    );
+                    f.clip_and_step(cfg.max_grad_norm as f32, lr as f32, 1e-5);
+                    (pg_l, v_l, ent_l, kl) = (st.policy_loss, st.value_loss, st.entropy, st.approx_kl);
+                    clipfracs.push(st.clipfrac);
+                }
+            }
+            f.write_to(&mut agent);
+        } else {
+            let b_obs = Tensor::from_slice(&buf.nobs).view([batch as i64, od as i64]);
+            let b_act = Tensor::from_slice(&buf.actions).view([batch as i64, ad as i64]);
+            let b_logp = Tensor::from_slice(&buf.logp);
+            let b_adv = Tensor::from_slice(&adv);
+            let b_ret = Tensor::from_slice(&returns);
+            let b_val = Tensor::from_slice(&buf.values);
+            for _epoch in 0..cfg.update_epochs {
+                idx.shuffle(&mut rng);
+                for mb in idx.chunks(minibatch) {
+                    let mbi = Tensor::from_slice(mb);
+                    let (new_logp, entropy) = agent.log_prob_entropy(&b_obs.index_select(0, &mbi), &b_act.index_select(0, &mbi));
+                    let new_v = agent.value(&b_obs.index_select(0, &mbi));
+                    let logratio = &new_logp - b_logp.index_select(0, &mbi);
+                    let ratio = logratio.exp();
+                    tch::no_grad(|| {
+                        kl = ((&ratio - 1.0) - &logratio).mean(Kind::Float).double_value(&[]);
+                        clipfracs.push((&ratio - 1.0).abs().gt(cfg.clip_coef).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]));
+                    });
+                    let mut mb_adv = b_adv.index_select(0, &mbi);
+                    if cfg.norm_adv {
+                        mb_adv = (&mb_adv - mb_adv.mean(Kind::Float)) / (mb_adv.std(true) + 1e-8);
+                    }
+                    let pg1 = -&mb_adv * &ratio;
+                    let pg2 = -&mb_adv * ratio.clamp(1.0 - cfg.clip_coef, 1.0 + cfg.clip_coef);
+                    let pg_loss = pg1.maximum(&pg2).mean(Kind::Float);
+                    let mb_ret = b_ret.index_select(0, &mbi);
+                    let v_loss: Tensor = if cfg.clip_vloss {
+                        let mb_val = b_val.index_select(0, &mbi);
+                        let unclipped = (&new_v - &mb_ret).square();
+                        let clipped = (&mb_val + (&new_v - &mb_val).clamp(-cfg.clip_coef, cfg.clip_coef) - &mb_ret).square();
+                        unclipped.maximum(&clipped).mean(Kind::Float) * 0.5
+                    } else {
+                        (&new_v - &mb_ret).square().mean(Kind::Float) * 0.5
+                    };
+                    let ent = entropy.mean(Kind::Float);
+                    let loss: Tensor = &pg_loss - &ent * cfg.ent_coef + &v_loss * cfg.vf_coef;
+                    opt.zero_grad();
+                    loss.backward();
+                    opt.clip_grad_norm(cfg.max_grad_norm);
+                    opt.step();
+                    pg_l = pg_loss.double_value(&[]);
+                    v_l = v_loss.double_value(&[]);
+                    ent_l = ent.double_value(&[]);
+                }
             }
         }
         let var_y = variance(&returns);

@@ -5,7 +5,7 @@ use super::Activation;
 
 #[derive(Debug, Clone)]
 pub struct MlpCpu {
-    /// (weights `out x in` row-major, bias, in, out) per layer.
+    /// (weights transposed, `in x out` row-major, bias, in, out) per layer.
     layers: Vec<(Vec<f32>, Vec<f32>, usize, usize)>,
     activation: Activation,
     width: usize,
@@ -14,6 +14,20 @@ pub struct MlpCpu {
 impl MlpCpu {
     pub fn new(layers: Vec<(Vec<f32>, Vec<f32>, usize, usize)>, activation: Activation) -> Self {
         let width = layers.iter().map(|l| l.3.max(l.2)).max().unwrap_or(0);
+        // Stored transposed (in x out) so that the forward pass is contiguous axpys, which
+        // the compiler vectorises (a dot-product reduction it would not).
+        let layers = layers
+            .into_iter()
+            .map(|(w, b, inp, out)| {
+                let mut wt = vec![0.0; w.len()];
+                for o in 0..out {
+                    for i in 0..inp {
+                        wt[i * out + o] = w[o * inp + i];
+                    }
+                }
+                (wt, b, inp, out)
+            })
+            .collect();
         MlpCpu { layers, activation, width }
     }
 
@@ -31,21 +45,19 @@ impl MlpCpu {
         a[..x.len()].copy_from_slice(x);
         let (mut cur, mut next) = (a, b);
         let n = self.layers.len();
-        for (li, (w, bias, inp, outd)) in self.layers.iter().enumerate() {
-            for o in 0..*outd {
-                let row = &w[o * inp..(o + 1) * inp];
-                let mut s = bias[o];
-                for (wi, xi) in row.iter().zip(&cur[..*inp]) {
-                    s += wi * xi;
+        for (li, (wt, bias, inp, outd)) in self.layers.iter().enumerate() {
+            let y = &mut next[..*outd];
+            y.copy_from_slice(bias);
+            for (i, &xi) in cur[..*inp].iter().enumerate() {
+                for (yo, w) in y.iter_mut().zip(&wt[i * outd..(i + 1) * outd]) {
+                    *yo += xi * w;
                 }
-                next[o] = if li + 1 < n {
-                    match self.activation {
-                        Activation::Tanh => s.tanh(),
-                        Activation::Relu => s.max(0.0),
-                    }
-                } else {
-                    s
-                };
+            }
+            if li + 1 < n {
+                match self.activation {
+                    Activation::Tanh => y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v)),
+                    Activation::Relu => y.iter_mut().for_each(|v| *v = v.max(0.0)),
+                }
             }
             std::mem::swap(&mut cur, &mut next);
         }

@@ -22,3 +22,38 @@ pub fn seeded<T>(seed: u64, f: impl FnOnce() -> T) -> T {
     tch::manual_seed(seed as i64);
     f()
 }
+
+/// tanh in f32 as a rational minimax approximation (Eigen's `ptanh_float` coefficients):
+/// within a few ulp of `f32::tanh`, branch-free and vectorisable. libm's tanhf (through
+/// expm1f) took a third of a PPO run's time.
+#[inline]
+pub fn fast_tanh(x: f32) -> f32 {
+    let x = x.clamp(-9.0, 9.0);
+    let x2 = x * x;
+    let p = x2 * -2.760_768_5e-16 + 2.000_187_9e-13;
+    let p = x2 * p + -8.604_671_5e-11;
+    let p = x2 * p + 5.122_297e-8;
+    let p = x2 * p + 1.485_722_4e-5;
+    let p = x2 * p + 6.372_619_3e-4;
+    let p = x2 * p + 4.893_524_6e-3;
+    let q = x2 * 1.198_258_4e-6 + 1.185_347_1e-4;
+    let q = x2 * q + 2.268_434_6e-3;
+    let q = x2 * q + 4.893_525e-3;
+    let t = x * p / q;
+    if x.abs() < 4e-4 { x } else { t.clamp(-1.0, 1.0) }
+}
+
+#[cfg(test)]
+mod tanh_tests {
+    #[test]
+    fn fast_tanh_is_accurate() {
+        let mut worst = 0.0f64;
+        for i in -200_000..=200_000 {
+            let x = i as f32 * 1e-4;
+            worst = worst.max((super::fast_tanh(x) as f64 - (x as f64).tanh()).abs());
+        }
+        assert!(worst < 1e-6, "max abs error {worst}");
+        assert_eq!(super::fast_tanh(100.0), 1.0);
+        assert_eq!(super::fast_tanh(-100.0), -1.0);
+    }
+}
