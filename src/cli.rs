@@ -204,6 +204,9 @@ pub struct RolloutArgs {
 pub enum BenchCommand {
     /// Environment steps/s next to the raw mj_step rate and Gymnasium's Python environment.
     Env(crate::bench::EnvBenchArgs),
+    /// T-REX on epsilon-greedy rollouts of a trained policy: rank correlation of predicted and
+    /// true returns on held-out rollouts, and the training time.
+    Trex(crate::bench::TrexBenchArgs),
 }
 
 pub fn init_tracing(verbose: u8) {
@@ -212,14 +215,21 @@ pub fn init_tracing(verbose: u8) {
         1 => "info",
         _ => "debug",
     };
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    // MuJoCo's messages go through the log facade into tracing. Its model compiler warns
+    // about a deprecated attribute in gymnasium's own XML files on every load; that is not
+    // the user's to fix, so MuJoCo is shown from `error` up unless RUST_LOG says otherwise.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},mujoco=error")));
     let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    // SAFETY: called at start-up, before any thread uses MuJoCo.
+    unsafe { mujoco_rs::prelude::install_logging_hook() };
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Env(EnvCommand::Rollout(args)) => env_rollout(&args),
         Command::Bench(BenchCommand::Env(args)) => crate::bench::env_bench(&args),
+        Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
         Command::Train(TrainCommand::Ppo(args)) => train_ppo(&args),
         Command::Eval(args) => eval(&args),
         Command::Pipeline(PipelineCommand::Run(args)) => pipeline_run(&args),
@@ -348,10 +358,12 @@ fn train_ppo(args: &TrainPpoArgs) -> anyhow::Result<()> {
             bar.set_message(format!("return {r:.1}"));
         }
         if let Some(e) = &p.eval {
-            bar.println(format!(
+            let line = format!(
                 "step {:>8}: eval return {:.1} +- {:.1} over {} episodes ({:.0} steps/s)",
                 p.global_step, e.mean, e.std, e.episodes, p.sps
-            ));
+            );
+            // A hidden bar (no terminal) drops println; the evaluation lines must still show.
+            if bar.is_hidden() { println!("{line}") } else { bar.println(line) }
         }
         let f = |x: Option<f64>| x.map_or(String::new(), |v| format!("{v}"));
         curve.push_str(&format!(
