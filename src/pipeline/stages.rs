@@ -220,23 +220,21 @@ fn demonstrator(ctx: &StageCtx) -> Result<Value> {
               "final_eval": last.and_then(|p| p.eval.map(|e| e.mean))}))
 }
 
-fn demos(ctx: &StageCtx) -> Result<Value> {
-    let id = ctx.env()?;
+/// `episodes` rollouts of the stage's input `policy` (PPO policies sample, BC acts with its
+/// mean), episode k from a reset seeded with `episode_seed(seed, k)`.
+fn policy_rollouts(ctx: &StageCtx, id: EnvId, seed: u64, source: &str) -> Result<Vec<Trajectory>> {
     let episodes: usize = ctx.param("episodes")?;
     let policy = load_policy(ctx.input("policy")?)?;
     let mut env = Env::new(id)?;
     policy.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
     let mut actor = actor_of(&policy);
-    let trajs: Vec<Trajectory> = (0..episodes)
-        .map(|k| {
-            rollout::episode(
-                &mut env,
-                &mut actor,
-                episode_seed(ctx.seed, k as u64),
-                TrajMeta { source: "demonstrator".into(), ..Default::default() },
-            )
-        })
-        .collect();
+    let meta = TrajMeta { source: source.into(), ..Default::default() };
+    Ok((0..episodes).map(|k| rollout::episode(&mut env, &mut actor, episode_seed(seed, k as u64), meta.clone())).collect())
+}
+
+fn demos(ctx: &StageCtx) -> Result<Value> {
+    let id = ctx.env()?;
+    let trajs = policy_rollouts(ctx, id, ctx.seed, "demonstrator")?;
     write_rollouts(ctx, id, &trajs, None)?;
     Ok(returns_summary(&trajs))
 }
@@ -399,21 +397,7 @@ fn ppo_stage(ctx: &StageCtx) -> Result<Value> {
 
 fn eval(ctx: &StageCtx) -> Result<Value> {
     let id = ctx.env()?;
-    let episodes: usize = ctx.param("episodes")?;
-    let policy = load_policy(ctx.input("policy")?)?;
-    let mut env = Env::new(id)?;
-    policy.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
-    let mut actor = actor_of(&policy);
-    let trajs: Vec<Trajectory> = (0..episodes)
-        .map(|k| {
-            rollout::episode(
-                &mut env,
-                &mut actor,
-                episode_seed(ctx.seed ^ 0xe7a1, k as u64),
-                TrajMeta { source: "eval".into(), ..Default::default() },
-            )
-        })
-        .collect();
+    let trajs = policy_rollouts(ctx, id, ctx.seed ^ 0xe7a1, "eval")?;
     let mut out = returns_summary(&trajs);
     let mut learned = None;
     if let Some(dir) = ctx.inputs.get("reward") {
