@@ -84,6 +84,8 @@ fn collect(store: &Store) -> Result<Long> {
 /// The tables: returns per (env, pipeline, method) and reward accuracy per (env, method).
 pub struct Tables {
     pub returns: DataFrame,
+    /// (env, pipeline, method, run) of every evaluated run, to name missing runs.
+    pub runs: DataFrame,
     pub demos: DataFrame,
     pub accuracy: DataFrame,
 }
@@ -99,6 +101,14 @@ pub fn build(store: &Store) -> Result<Tables> {
         .agg([col("return").mean().alias("run_mean")])
         .group_by(keys.clone())
         .agg([col("run_mean").max().alias("best_run_avg"), col("run").n_unique().alias("runs")]);
+    let runs = long
+        .episodes
+        .clone()
+        .lazy()
+        .select([col("env"), col("pipeline"), col("method"), col("run")])
+        .unique(None, Default::default())
+        .collect()
+        .map_err(pe)?;
     let returns = long
         .episodes
         .lazy()
@@ -124,7 +134,7 @@ pub fn build(store: &Store) -> Result<Tables> {
         .sort(["env", "method"], Default::default())
         .collect()
         .map_err(pe)?;
-    Ok(Tables { returns, demos, accuracy })
+    Ok(Tables { returns, runs, demos, accuracy })
 }
 
 fn cell_f(df: &DataFrame, name: &str, i: usize) -> Option<f64> {
@@ -159,8 +169,19 @@ pub fn markdown(t: &Tables) -> String {
                 None => " missing |".to_string(),
                 Some(i) => {
                     let runs = cell_f(&t.returns, "runs", i).unwrap_or(0.0);
+                    // Runs that other methods of this pipeline have and this one lacks.
+                    let seen = |method: Option<&str>| -> std::collections::BTreeSet<i64> {
+                        (0..t.runs.height())
+                            .filter(|&j| &cell_s(&t.runs, "env", j) == env && &cell_s(&t.runs, "pipeline", j) == pipe)
+                            .filter(|&j| method.is_none_or(|m| cell_s(&t.runs, "method", j) == m) && cell_s(&t.runs, "method", j) != "bc")
+                            .filter_map(|j| cell_f(&t.runs, "run", j).map(|r| r as i64))
+                            .collect()
+                    };
+                    let missing: Vec<String> = seen(None).difference(&seen(Some(m))).map(|r| r.to_string()).collect();
+                    let missing =
+                        if m == "bc" || missing.is_empty() { String::new() } else { format!("; run {} missing", missing.join(", ")) };
                     format!(
-                        " {:.1} ± {:.1} ({:.1}{}) |",
+                        " {:.1} ± {:.1} ({:.1}{}{missing}) |",
                         cell_f(&t.returns, "mean", i).unwrap_or(f64::NAN),
                         cell_f(&t.returns, "std", i).unwrap_or(f64::NAN),
                         cell_f(&t.returns, "best_run_avg", i).unwrap_or(f64::NAN),

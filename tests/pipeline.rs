@@ -108,6 +108,15 @@ print("ok")
     assert_eq!(computed(&healed), 1, "{}", stdout(&healed));
     assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
 
+    // A missing run is named in the report.
+    let drex_eval_1 = artifact_dirs(&store)
+        .into_iter()
+        .find(|d| std::fs::read_to_string(d.join("manifest.json")).unwrap().contains("\"node\": \"drex/eval/1\""))
+        .unwrap();
+    std::fs::remove_dir_all(drex_eval_1).unwrap();
+    let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", out_dir.to_str().unwrap()]);
+    assert!(stdout(&rep).contains("run 1 missing"), "{}", stdout(&rep));
+
     // logs: list and export reopen our files.
     let l = idrex(&["logs", "list", mcaps[1].to_str().unwrap()]);
     assert!(l.status.success() && stdout(&l).contains("episodes of Hopper-v5"), "{}", stderr(&l));
