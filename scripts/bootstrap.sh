@@ -61,30 +61,34 @@ fi
 
 rm -rf "$env_dir"  # a half-made environment from an interrupted run is never trusted
 mkdir -p "$env_dir"
-log="$env_dir/install.log"
+log="$cache/env-$hash.install.log"
+: >"$log"
+# From here on a failure removes the environment; the log stays next to it.
+fail() { rm -rf "$env_dir"; die "$@"; }
 echo "bootstrap: creating $env_dir (Python $pyver); log in $log" >&2
-"$python" -m venv "$env_dir/venv" >>"$log" 2>&1 || die "python -m venv failed (see $log); on Debian install python3-venv"
+"$python" -m venv "$env_dir/venv" >>"$log" 2>&1 9>&- || fail "python -m venv failed (see $log); on Debian install python3-venv"
 pip=("$env_dir/venv/bin/python" -m pip --disable-pip-version-check)
 while read -r line; do
   pkg="${line%%#*}"; pkg="$(echo "$pkg" | xargs)"
   [ -n "$pkg" ] || continue
   echo "bootstrap: pip install $pkg" >&2
-  if ! "${pip[@]}" install "$pkg" >>"$log" 2>&1; then
+  # 9>&-: pip must not inherit the lock, or a killed bootstrap would leave it held.
+  if ! "${pip[@]}" install "$pkg" >>"$log" 2>&1 9>&-; then
     cause="$(grep -E 'ERROR|error:' "$log" | tail -n 3)"
-    die "pip could not install '$pkg': ${cause:-see $log} (nothing was kept; rerun once the cause is fixed)"
+    fail "pip could not install '$pkg': ${cause:-see $log} (the environment was removed; the log is $log; rerun once the cause is fixed)"
   fi
 done <"$req"
 
 site="$("$env_dir/venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 mj_so="$(ls "$site"/mujoco/libmujoco.so.* 2>/dev/null | head -n1)"
-[ -n "$mj_so" ] || die "the mujoco wheel has no libmujoco.so.* under $site/mujoco"
+[ -n "$mj_so" ] || fail "the mujoco wheel has no libmujoco.so.* under $site/mujoco"
 mkdir -p "$env_dir/lib"
 ln -sfn "$mj_so" "$env_dir/lib/libmujoco.so"
 ln -sfn "$mj_so" "$env_dir/lib/$(basename "$mj_so")"
 ln -sfn "$site/torch" "$env_dir/torch"
-[ -f "$env_dir/torch/lib/libtorch_cpu.so" ] || die "the torch wheel has no lib/libtorch_cpu.so under $site/torch"
+[ -f "$env_dir/torch/lib/libtorch_cpu.so" ] || fail "the torch wheel has no lib/libtorch_cpu.so under $site/torch"
 assets="$site/gymnasium/envs/mujoco/assets"
-[ -f "$assets/half_cheetah.xml" ] || die "gymnasium's MuJoCo model files are not at $assets"
+[ -f "$assets/half_cheetah.xml" ] || fail "gymnasium's MuJoCo model files are not at $assets"
 ln -sfn "$assets" "$env_dir/mujoco-assets"
 
 touch "$env_dir/.complete"

@@ -1,6 +1,7 @@
 //! Integration tests: one binary (linking libtorch once), one module per topic.
 mod util;
 
+mod bootstrap;
 mod env_cli;
 mod env_equivalence;
 mod pipeline;
