@@ -125,8 +125,18 @@ pub fn measure_env(id: EnvId, args: &EnvBenchArgs) -> anyhow::Result<EnvBench> {
     let mj_rate = raw_pass(&mut env, &actions, &ends);
     let frame_skip = env.spec().frame_skip;
     let bound = mj_rate / frame_skip as f64;
-    let vec1 = vec_pass(id, args.num_envs, 1, args.steps)?;
-    let vecn = vec_pass(id, args.num_envs, args.threads, args.steps)?;
+    // Alternate one-thread and n-thread passes and keep the medians: on a shared machine a
+    // single pair of short passes swings by +-20 %.
+    let (mut v1, mut vn) = (Vec::new(), Vec::new());
+    for _ in 0..5 {
+        v1.push(vec_pass(id, args.num_envs, 1, args.steps)?);
+        vn.push(vec_pass(id, args.num_envs, args.threads, args.steps)?);
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (vec1, vecn) = (median(&mut v1), median(&mut vn));
     let python = args.python.clone().or_else(default_python).filter(|p| p != "none");
     let gym = match python {
         Some(p) => Some(gymnasium_pass(&p, id, args.steps.min(20_000))?),

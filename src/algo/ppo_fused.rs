@@ -281,34 +281,6 @@ impl Fused {
         stats
     }
 
-    /// Behavioural cloning's loss on one batch: mean over rows of the squared error summed
-    /// over action dimensions, plus `l2` times the sum of squared actor weights (not biases).
-    /// Leaves the gradient in `self.grads` and returns the loss.
-    pub fn bc_loss_and_grad(&mut self, obs: &[f32], targets: &[f32], l2: f32) -> f64 {
-        let b = targets.len() / self.act_dim;
-        self.grads.iter_mut().for_each(|g| *g = 0.0);
-        Self::forward(&self.params, &self.actor, self.activation, obs, b, &mut self.acts_a, &mut self.wt);
-        let mu = self.acts_a.last().expect("output");
-        let mut loss = 0.0f64;
-        let d: Vec<f32> = mu
-            .iter()
-            .zip(targets)
-            .map(|(m, y)| {
-                loss += ((m - y) * (m - y)) as f64;
-                2.0 * (m - y) / b as f32
-            })
-            .collect();
-        loss /= b as f64;
-        for ly in &self.actor {
-            for i in ly.w..ly.w + ly.inp * ly.out {
-                loss += (l2 * self.params[i] * self.params[i]) as f64;
-                self.grads[i] += 2.0 * l2 * self.params[i];
-            }
-        }
-        Self::backward(&self.params, &mut self.grads, &self.actor, self.activation, &self.acts_a, d, b);
-        loss
-    }
-
     /// Clips the gradient's global norm to `max_norm` (as torch's clip_grad_norm_) and takes
     /// one Adam step (betas 0.9, 0.999).
     pub fn clip_and_step(&mut self, max_norm: f32, lr: f32, eps: f32) {
@@ -363,28 +335,6 @@ mod tests {
         let clipped = (old_v + (&v - old_v).clamp(-c.clip_coef as f64, c.clip_coef as f64) - ret).square();
         let vl = unclipped.maximum(&clipped).mean(Kind::Float) * 0.5;
         pg - entropy.mean(Kind::Float) * c.ent_coef as f64 + vl * c.vf_coef as f64
-    }
-
-    #[test]
-    fn bc_loss_matches_libtorch_autograd() {
-        let agent = crate::nn::seeded(4, || ActorCritic::new(PolicyConfig::bc(5, 2)));
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        let x: Vec<f32> = (0..32 * 5).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let y: Vec<f32> = (0..32 * 2).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let mut fused = Fused::from_agent(&agent);
-        let ours = fused.bc_loss_and_grad(&x, &y, 1e-3);
-        let (xt, yt) = (Tensor::from_slice(&x).view([32, 5]), Tensor::from_slice(&y).view([32, 2]));
-        let loss =
-            (agent.mean(&xt) - yt).square().sum_dim_intlist(-1, false, Kind::Float).mean(Kind::Float) + agent.actor.weight_l2() * 1e-3;
-        loss.backward();
-        assert!((ours - loss.double_value(&[])).abs() < 1e-4 * ours.abs().max(1.0), "{ours} vs {}", loss.double_value(&[]));
-        let vars = agent.vs.variables();
-        for (name, off, len) in fused.param_names().iter().filter(|(n, _, _)| n.starts_with("actor")) {
-            let g: Vec<f32> = Vec::try_from(vars[name].grad().flatten(0, -1)).unwrap();
-            for (i, (a, e)) in fused.grads()[*off..off + len].iter().zip(&g).enumerate() {
-                assert!((a - e).abs() <= 1e-5 + 1e-4 * e.abs(), "{name}[{i}]: ours {a} vs autograd {e}");
-            }
-        }
     }
 
     #[test]
