@@ -449,6 +449,19 @@ mod tests {
     }
 
     #[test]
+    fn the_tch_backend_takes_the_same_first_step() {
+        // One update of one minibatch from the same initial weights: the two backends compute
+        // the same loss, so the weights after the step agree to float precision.
+        let cfg = PpoConfig { total_steps: 256, num_envs: 1, num_steps: 256, num_minibatches: 1, update_epochs: 1, ..Default::default() };
+        let fused = train(EnvId::Hopper, &cfg, RewardSource::GroundTruth, 9, &mut |_| true, None).unwrap();
+        let tch_cfg = PpoConfig { backend: Backend::Tch, ..cfg };
+        let tch = train(EnvId::Hopper, &tch_cfg, RewardSource::GroundTruth, 9, &mut |_| true, None).unwrap();
+        let x = Tensor::ones([1, 11], (Kind::Float, tch::Device::Cpu));
+        assert!(fused.policy.mean(&x).allclose(&tch.policy.mean(&x), 1e-4, 1e-5, false));
+        assert!(fused.policy.value(&x).allclose(&tch.policy.value(&x), 1e-4, 1e-5, false));
+    }
+
+    #[test]
     fn deterministic_for_a_seed() {
         let cfg = PpoConfig { total_steps: 1024, num_envs: 2, num_steps: 256, update_epochs: 2, ..Default::default() };
         let a = train(EnvId::HalfCheetah, &cfg, RewardSource::GroundTruth, 5, &mut |_| true, None).unwrap();
