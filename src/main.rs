@@ -2,7 +2,15 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+unsafe extern "C" {
+    fn signal(signum: i32, handler: usize) -> usize;
+}
+
 fn main() -> ExitCode {
+    // Die quietly on a closed pipe (`idrex logs show F | head`), as Unix tools do, instead of
+    // panicking in println!. SIGPIPE = 13, SIG_DFL = 0 on Linux.
+    // SAFETY: restoring the default disposition of a signal, before any thread starts.
+    unsafe { signal(13, 0) };
     let cli = idrex::cli::Cli::parse();
     idrex::cli::init_tracing(cli.verbose);
     match idrex::cli::run(cli) {
