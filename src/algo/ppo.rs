@@ -294,25 +294,25 @@ pub fn train(
         let (mut pg_l, mut v_l, mut ent_l, mut kl, mut clipfracs) = (0.0, 0.0, 0.0, 0.0, Vec::new());
         let mut idx: Vec<i64> = (0..batch as i64).collect();
         if let Some(f) = &mut fused {
-            let gather = |src: &[f32], d: usize, mb: &[i64]| -> Vec<f32> {
-                let mut v = Vec::with_capacity(mb.len() * d);
+            // Minibatch buffers reused across the update's 320 steps.
+            let gather = |dst: &mut Vec<f32>, src: &[f32], d: usize, mb: &[i64]| {
+                dst.clear();
                 for &k in mb {
-                    v.extend_from_slice(&src[k as usize * d..(k as usize + 1) * d]);
+                    dst.extend_from_slice(&src[k as usize * d..(k as usize + 1) * d]);
                 }
-                v
             };
+            let mut mbuf: [Vec<f32>; 6] = Default::default();
             for _epoch in 0..cfg.update_epochs {
                 idx.shuffle(&mut rng);
                 for mb in idx.chunks(minibatch) {
-                    let st = f.loss_and_grad(
-                        &gather(&buf.nobs, od, mb),
-                        &gather(&buf.actions, ad, mb),
-                        &gather(&buf.logp, 1, mb),
-                        &gather(&adv, 1, mb),
-                        &gather(&returns, 1, mb),
-                        &gather(&buf.values, 1, mb),
-                        loss_cfg,
-                    );
+                    let [o, a, lp, ad_, r, v] = &mut mbuf;
+                    gather(o, &buf.nobs, od, mb);
+                    gather(a, &buf.actions, ad, mb);
+                    gather(lp, &buf.logp, 1, mb);
+                    gather(ad_, &adv, 1, mb);
+                    gather(r, &returns, 1, mb);
+                    gather(v, &buf.values, 1, mb);
+                    let st = f.loss_and_grad(o, a, lp, ad_, r, v, loss_cfg);
                     f.clip_and_step(cfg.max_grad_norm as f32, lr as f32, 1e-5);
                     (pg_l, v_l, ent_l, kl) = (st.policy_loss, st.value_loss, st.entropy, st.approx_kl);
                     clipfracs.push(st.clipfrac);

@@ -137,18 +137,15 @@ impl VecEnv {
             });
         }
         let act_dim = self.act_dim;
-        let step_one = |(s, a): (&mut Slot, &[f32])| step_slot(s, a);
         match &self.pool {
             Some(pool) => {
                 // One contiguous chunk per thread; the caller steps the first chunk itself.
                 let per = self.slots.len().div_ceil(pool.len() + 1);
                 let mut chunks = self.slots.chunks_mut(per).zip(actions.chunks(per * act_dim));
                 let first = chunks.next().expect("at least one environment");
-                pool.run(chunks.map(|(slots, acts)| (slots, acts)).collect(), act_dim, || {
-                    first.0.iter_mut().zip(first.1.chunks(act_dim)).for_each(step_one)
-                });
+                pool.run(chunks.collect(), act_dim, || step_chunk(first.0, first.1, act_dim));
             }
-            None => self.slots.iter_mut().zip(actions.chunks(act_dim)).for_each(step_one),
+            None => step_chunk(&mut self.slots, actions, act_dim),
         }
         let out = &mut self.out;
         out.episodes.clear();
@@ -192,6 +189,8 @@ struct WorkerShared {
     generation: AtomicU64,
     done: AtomicU64,
     stop: AtomicBool,
+    /// Set when the last job panicked; the caller re-raises it.
+    panicked: AtomicBool,
     job: std::sync::Mutex<Option<Job>>,
 }
 
@@ -215,6 +214,7 @@ impl SpinPool {
                     generation: AtomicU64::new(0),
                     done: AtomicU64::new(0),
                     stop: AtomicBool::new(false),
+                    panicked: AtomicBool::new(false),
                     job: std::sync::Mutex::new(None),
                 });
                 let s = shared.clone();
@@ -238,9 +238,10 @@ impl SpinPool {
                             // SAFETY: see `Job`.
                             let slots = unsafe { std::slice::from_raw_parts_mut(job.slots, job.len) };
                             let acts = unsafe { std::slice::from_raw_parts(job.actions, job.len * job.act_dim) };
-                            for (slot, a) in slots.iter_mut().zip(acts.chunks(job.act_dim)) {
-                                step_slot(slot, a);
-                            }
+                            // A panic must still answer, or the caller would spin forever.
+                            let ok =
+                                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| step_chunk(slots, acts, job.act_dim))).is_ok();
+                            s.panicked.store(!ok, Ordering::Relaxed);
                         }
                         s.done.store(seen, Ordering::Release);
                     }
@@ -272,6 +273,7 @@ impl SpinPool {
             while w.shared.done.load(Ordering::Acquire) != g {
                 std::hint::spin_loop();
             }
+            assert!(!w.shared.panicked.load(Ordering::Relaxed), "an environment worker thread panicked while stepping");
         }
     }
 }
@@ -288,13 +290,16 @@ impl Drop for SpinPool {
     }
 }
 
-fn step_slot(s: &mut Slot, a: &[f32]) {
-    for (dst, &src) in s.action.iter_mut().zip(a) {
-        *dst = src as f64;
+/// Steps each slot with its row of `actions`.
+fn step_chunk(slots: &mut [Slot], actions: &[f32], act_dim: usize) {
+    for (s, a) in slots.iter_mut().zip(actions.chunks(act_dim)) {
+        for (dst, &src) in s.action.iter_mut().zip(a) {
+            *dst = src as f64;
+        }
+        s.info = s.env.step_unchecked(&s.action, &mut s.obs);
+        s.episode_return += s.info.reward;
+        s.episode_len += 1;
     }
-    s.info = s.env.step_unchecked(&s.action, &mut s.obs);
-    s.episode_return += s.info.reward;
-    s.episode_len += 1;
 }
 
 fn to_f32(src: &[f64], dst: &mut [f32]) {
