@@ -210,29 +210,16 @@ pub struct TrexBenchArgs {
     pub seed: u64,
 }
 
-/// Epsilon-greedy rollouts of `policy` at D-REX's 20 levels, `per_level` each.
+/// Epsilon-greedy rollouts of `policy` at D-REX's 20 levels, `per_level` each: the
+/// pipeline's own noise-rollout helper, so bench and pipeline figures are comparable.
 fn eps_rollouts(env: &mut Env, policy: &crate::nn::ActorCritic, per_level: usize, seed: u64) -> Vec<crate::data::Trajectory> {
-    use crate::algo::noise::{EpsilonGreedy, PolicyActor, UniformActor};
-    let (low, high) = env.action_bounds();
-    let (low, high) = (low.to_vec(), high.to_vec());
-    let mut out = Vec::new();
-    for level in 0..20 {
-        let eps = level as f64 * 0.05;
-        let mut actor = EpsilonGreedy {
-            inner: PolicyActor::new(policy.to_cpu(), policy.critic.is_some()),
-            eps,
-            uniform: UniformActor { low: low.clone(), high: high.clone() },
-        };
-        for k in 0..per_level {
-            let meta = crate::data::TrajMeta { source: "bench".into(), noise: eps, ..Default::default() };
-            out.push(crate::rollout::episode(env, &mut actor, seed.wrapping_mul(10_000).wrapping_add((level * 100 + k) as u64), meta));
-        }
-    }
-    out
+    let schedule: Vec<f64> = (0..20).map(|level| level as f64 * 0.05).collect();
+    let meta = crate::data::TrajMeta { source: "bench".into(), ..Default::default() };
+    crate::rollout::epsilon_greedy(env, policy, &schedule, per_level, seed, &meta)
 }
 
 pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
-    use crate::algo::trex;
+    use crate::{algo::trex, stats};
     let policy = crate::nn::ActorCritic::load(&args.policy)?;
     let id: EnvId = policy.env.clone().context("the policy does not name its environment")?.parse()?;
     let mut env = Env::new(id)?;
@@ -240,7 +227,7 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
     let held = eps_rollouts(&mut env, &policy, args.held_out_per_level, args.seed + 1);
     let cfg = trex::TrexConfig { iterations: args.iterations, ..Default::default() };
     let ranking = trex::Ranking::by_score(train.iter().map(|t| -t.meta.noise).collect());
-    let ctrl = if id == EnvId::HalfCheetah { 0.1 } else { 1e-3 };
+    let ctrl = crate::pipeline::config::default_ctrl_coeff(id);
     let start = Instant::now();
     let (model, reports) = trex::train(&train, &ranking, &cfg, ctrl, args.seed)?;
     let secs = start.elapsed().as_secs_f64();
@@ -251,8 +238,8 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
         "models": cfg.models, "iterations": cfg.iterations, "train_s": secs,
         "iterations_per_s": (cfg.models * cfg.iterations) as f64 / secs,
         "val_accuracy": reports.iter().map(|r| r.val_accuracy).collect::<Vec<_>>(),
-        "held_out_spearman": trex::spearman(&pred, &truth), "held_out_pearson": trex::pearson(&pred, &truth),
-        "held_out_pairwise_accuracy": trex::pairwise_accuracy(&pred, &truth),
+        "held_out_spearman": stats::spearman(&pred, &truth), "held_out_pearson": stats::pearson(&pred, &truth),
+        "held_out_pairwise_accuracy": stats::pairwise_accuracy(&pred, &truth),
     });
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())

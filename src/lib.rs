@@ -18,6 +18,8 @@ pub mod nn;
 pub mod pipeline;
 pub mod report;
 pub mod rollout;
+pub mod seed;
+pub mod stats;
 pub mod store;
 
 pub use error::{Error, Result};

@@ -7,6 +7,8 @@
 use polars::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::pipeline::Method;
+use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::store::Store;
 
 fn pe(e: PolarsError) -> Error {
@@ -27,37 +29,43 @@ fn collect(store: &Store) -> Result<Long> {
     let (mut a_env, mut a_method, mut a_pearson, mut a_spearman, mut a_pairwise) = (vec![], vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
     for m in store.manifests()? {
-        if m.kind != "eval" {
+        if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
-        let e = m.params["env"].as_str().unwrap_or_default().to_string();
-        let meth = m.params["method"].as_str().unwrap_or_default().to_string();
-        let pipe = m.params["pipeline"].as_str().unwrap_or_default().to_string();
-        let label =
-            if m.params["iteration"].as_u64().unwrap_or(0) > 2 { format!("{meth} (k={})", m.params["iteration"]) } else { meth.clone() };
-        for r in m.metrics["returns"].as_array().into_iter().flatten() {
+        let (p, x) = match Typed::of(&m) {
+            Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) => (p, x),
+            Ok(_) => continue,
+            Err(e) => {
+                tracing::warn!("skipping {}: {e}", m.key);
+                continue;
+            }
+        };
+        let e = p.env.name().to_string();
+        let label = if p.iteration > 2 { format!("{} (k={})", p.method.name(), p.iteration) } else { p.method.name().to_string() };
+        for &r in &x.summary.returns {
             env.push(e.clone());
             method.push(label.clone());
-            pipeline.push(pipe.clone());
-            run.push(m.params["run"].as_u64().unwrap_or(0) as u32);
-            ret.push(r.as_f64().unwrap_or(f64::NAN));
+            pipeline.push(p.pipeline.clone());
+            run.push(p.run as u32);
+            ret.push(r);
         }
-        if let Some(s) = m.metrics["spearman"].as_f64() {
+        if let Some(acc) = &x.reward {
             a_env.push(e.clone());
             a_method.push(label.clone());
-            a_spearman.push(s);
-            a_pearson.push(m.metrics["pearson"].as_f64().unwrap_or(f64::NAN));
-            a_pairwise.push(m.metrics["pairwise_accuracy"].as_f64().unwrap_or(f64::NAN));
+            a_spearman.push(acc.spearman);
+            a_pearson.push(acc.pearson);
+            a_pairwise.push(acc.pairwise_accuracy);
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
         if let Some(dk) = m.inputs.get("demos")
-            && demo_keys.insert((e.clone(), pipe.clone(), dk.clone()))
+            && demo_keys.insert((e.clone(), p.pipeline.clone(), dk.clone()))
             && let Ok(dm) = store.check(dk)
+            && let Ok(Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. }) = Typed::of(&dm)
         {
-            for r in dm.metrics["returns"].as_array().into_iter().flatten() {
+            for &r in &d.returns {
                 d_env.push(e.clone());
-                d_pipeline.push(pipe.clone());
-                d_ret.push(r.as_f64().unwrap_or(f64::NAN));
+                d_pipeline.push(p.pipeline.clone());
+                d_ret.push(r);
             }
         }
     }
@@ -144,8 +152,6 @@ fn cell_s(df: &DataFrame, name: &str, i: usize) -> String {
     df.column(name).ok().and_then(|c| c.str().ok().and_then(|s| s.get(i).map(str::to_string))).unwrap_or_default()
 }
 
-const METHODS: [&str; 5] = ["bc", "drex", "idrex-interpolation", "idrex-action-noise", "idrex-multi-bc"];
-
 /// The paper-style markdown: one row per (env, pipeline).
 pub fn markdown(t: &Tables) -> String {
     let mut out = String::from("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
@@ -161,7 +167,7 @@ pub fn markdown(t: &Tables) -> String {
             f(demo_row.and_then(|i| cell_f(&t.demos, "demos_avg", i))),
             f(demo_row.and_then(|i| cell_f(&t.demos, "demos_best", i)))
         ));
-        for m in METHODS {
+        for m in Method::ALL.map(Method::name) {
             let i = (0..t.returns.height()).find(|&i| {
                 &cell_s(&t.returns, "env", i) == env && &cell_s(&t.returns, "pipeline", i) == pipe && cell_s(&t.returns, "method", i) == m
             });
@@ -173,19 +179,25 @@ pub fn markdown(t: &Tables) -> String {
                     let seen = |method: Option<&str>| -> std::collections::BTreeSet<i64> {
                         (0..t.runs.height())
                             .filter(|&j| &cell_s(&t.runs, "env", j) == env && &cell_s(&t.runs, "pipeline", j) == pipe)
-                            .filter(|&j| method.is_none_or(|m| cell_s(&t.runs, "method", j) == m) && cell_s(&t.runs, "method", j) != "bc")
+                            .filter(|&j| {
+                                method.is_none_or(|m| cell_s(&t.runs, "method", j) == m)
+                                    && cell_s(&t.runs, "method", j) != Method::Bc.name()
+                            })
                             .filter_map(|j| cell_f(&t.runs, "run", j).map(|r| r as i64))
                             .collect()
                     };
                     let missing: Vec<String> = seen(None).difference(&seen(Some(m))).map(|r| r.to_string()).collect();
-                    let missing =
-                        if m == "bc" || missing.is_empty() { String::new() } else { format!("; run {} missing", missing.join(", ")) };
+                    let missing = if m == Method::Bc.name() || missing.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; run {} missing", missing.join(", "))
+                    };
                     format!(
                         " {:.1} ± {:.1} ({:.1}{}{missing}) |",
                         cell_f(&t.returns, "mean", i).unwrap_or(f64::NAN),
                         cell_f(&t.returns, "std", i).unwrap_or(f64::NAN),
                         cell_f(&t.returns, "best_run_avg", i).unwrap_or(f64::NAN),
-                        if m == "bc" { String::new() } else { format!(", {runs:.0} runs") }
+                        if m == Method::Bc.name() { String::new() } else { format!(", {runs:.0} runs") }
                     )
                 }
             };

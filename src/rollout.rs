@@ -1,11 +1,16 @@
-//! The one rollout loop shared by noise rollouts, demonstrations and evaluation: any
-//! [`Actor`] in one environment, full episodes, actions clipped to the box before the step
-//! (Gymnasium's ClipAction, as CleanRL and SB3 use).
-use rand::SeedableRng;
+//! The one rollout loop shared by noise rollouts, demonstrations, evaluation and PPO's
+//! evaluations: any [`Actor`] in one environment, full episodes, actions clipped to the box
+//! before the step (Gymnasium's ClipAction, as CleanRL and SB3 use). The base actors live
+//! here too: a stored policy ([`PolicyActor`]) and uniform random actions; the noise that
+//! wraps them is in [`crate::algo::noise`].
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::Env;
+use crate::nn::ActorCritic;
+use crate::nn::policy::CpuPolicy;
+use crate::seed::{self, Purpose};
 
 /// Anything that maps an observation to an action.
 pub trait Actor {
@@ -14,10 +19,19 @@ pub trait Actor {
     fn reset(&mut self) {}
 }
 
+impl<A: Actor + ?Sized> Actor for Box<A> {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        (**self).act(obs, rng, out)
+    }
+    fn reset(&mut self) {
+        (**self).reset()
+    }
+}
+
 /// One full episode from a seeded reset; the actor's randomness is seeded from `seed` too.
 pub fn episode(env: &mut Env, actor: &mut dyn Actor, seed: u64, meta: TrajMeta) -> Trajectory {
     let (od, ad) = (env.obs_dim(), env.act_dim());
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x9e37_79b9_7f4a_7c15);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::ActorNoise, 0));
     let mut obs64 = vec![0.0; od];
     env.reset(Some(seed), &mut obs64);
     let mut t = Trajectory { obs_dim: od, act_dim: ad, meta: TrajMeta { seed, ..meta }, ..Default::default() };
@@ -48,27 +62,108 @@ pub fn episode(env: &mut Env, actor: &mut dyn Actor, seed: u64, meta: TrajMeta) 
     }
 }
 
-/// Mean, std, min and max of a set of returns.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ReturnStats {
-    pub mean: f64,
-    pub std: f64,
-    pub min: f64,
-    pub max: f64,
-    pub episodes: usize,
+/// `episodes` episodes of `actor`, episode k from the seed `derive(seed, purpose, k)`.
+pub fn episodes(env: &mut Env, actor: &mut dyn Actor, episodes: usize, seed: u64, purpose: Purpose, meta: &TrajMeta) -> Vec<Trajectory> {
+    (0..episodes).map(|k| episode(env, actor, seed::derive(seed, purpose, k as u64), meta.clone())).collect()
 }
 
-impl ReturnStats {
-    pub fn of(returns: &[f64]) -> Self {
-        let n = returns.len().max(1) as f64;
-        let mean = returns.iter().sum::<f64>() / n;
-        let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
-        ReturnStats {
-            mean,
-            std,
-            min: returns.iter().copied().fold(f64::INFINITY, f64::min),
-            max: returns.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-            episodes: returns.len(),
+/// A rollout set over noise levels: `per_level` episodes of `make(level)` for each level, the
+/// k-th episode of the set (counted over all levels) from `derive(seed, Episode, k)`, each
+/// labelled with its level.
+pub fn at_levels<A: Actor>(
+    env: &mut Env,
+    seed: u64,
+    levels: &[f64],
+    per_level: usize,
+    meta: &TrajMeta,
+    mut make: impl FnMut(f64) -> A,
+) -> Vec<Trajectory> {
+    let mut out = Vec::with_capacity(levels.len() * per_level);
+    for &level in levels {
+        let mut actor = make(level);
+        for _ in 0..per_level {
+            let k = out.len() as u64;
+            out.push(episode(env, &mut actor, seed::derive(seed, Purpose::Episode, k), TrajMeta { noise: level, ..meta.clone() }));
+        }
+    }
+    out
+}
+
+/// D-REX's noise injection: epsilon-greedy rollouts around a policy's mean action, `per_level`
+/// per epsilon of `schedule`.
+pub fn epsilon_greedy(
+    env: &mut Env,
+    policy: &ActorCritic,
+    schedule: &[f64],
+    per_level: usize,
+    seed: u64,
+    meta: &TrajMeta,
+) -> Vec<Trajectory> {
+    let uniform = UniformActor::of(env);
+    at_levels(env, seed, schedule, per_level, meta, |eps| crate::algo::noise::EpsilonGreedy {
+        inner: PolicyActor::mean_of(policy),
+        eps,
+        uniform: uniform.clone(),
+    })
+}
+
+/// A policy acting with its mean action or sampling from its Gaussian.
+pub struct PolicyActor {
+    pub policy: CpuPolicy,
+    pub stochastic: bool,
+    nobs: Vec<f32>,
+    mean: Vec<f32>,
+    scratch: Vec<f32>,
+}
+
+impl PolicyActor {
+    pub fn new(policy: CpuPolicy, stochastic: bool) -> Self {
+        let (od, ad) = (policy.obs_dim(), policy.act_dim());
+        PolicyActor { policy, stochastic, nobs: vec![0.0; od], mean: vec![0.0; ad], scratch: Vec::new() }
+    }
+
+    /// How a stored policy acts: PPO policies (with a critic) sample, BC policies act with
+    /// their mean.
+    pub fn acting(policy: &ActorCritic) -> Self {
+        PolicyActor::new(policy.to_cpu(), policy.critic.is_some())
+    }
+
+    /// The policy's mean action, whatever kind it is (the base of injected noise).
+    pub fn mean_of(policy: &ActorCritic) -> Self {
+        PolicyActor::new(policy.to_cpu(), false)
+    }
+}
+
+impl Actor for PolicyActor {
+    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        self.policy.normalize(obs, &mut self.nobs);
+        self.policy.mean(&self.nobs, &mut self.mean, &mut self.scratch);
+        if self.stochastic {
+            self.policy.sample(&self.mean, rng, out);
+        } else {
+            out.copy_from_slice(&self.mean);
+        }
+    }
+}
+
+/// Uniform actions in the box. Used alone and as the random part of epsilon-greedy.
+#[derive(Debug, Clone)]
+pub struct UniformActor {
+    pub low: Vec<f64>,
+    pub high: Vec<f64>,
+}
+
+impl UniformActor {
+    pub fn of(env: &Env) -> Self {
+        let (low, high) = env.action_bounds();
+        UniformActor { low: low.to_vec(), high: high.to_vec() }
+    }
+}
+
+impl Actor for UniformActor {
+    fn act(&mut self, _obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+        for ((o, &l), &h) in out.iter_mut().zip(&self.low).zip(&self.high) {
+            *o = rng.random_range(l..h) as f32;
         }
     }
 }

@@ -99,8 +99,8 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCr
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::algo::noise::PolicyActor;
     use crate::env::{Env, EnvId};
+    use crate::rollout::PolicyActor;
     use crate::rollout::{self, Actor};
 
     /// A known linear policy on Hopper; BC on its rollouts must reproduce its actions.

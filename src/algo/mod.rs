@@ -2,5 +2,4 @@
 pub mod bc;
 pub mod noise;
 pub mod ppo;
-pub mod ppo_fused;
 pub mod trex;

@@ -7,47 +7,28 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::nn::policy::CpuPolicy;
-use crate::rollout::Actor;
+use crate::rollout::{Actor, UniformActor};
 
-/// A policy acting with its mean action or sampling from its Gaussian.
-pub struct PolicyActor {
-    pub policy: CpuPolicy,
-    pub stochastic: bool,
-    nobs: Vec<f32>,
-    mean: Vec<f32>,
-    scratch: Vec<f32>,
+/// The noise processes iD-REX's action-noise variant can inject (`idrex.action_noise`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseProcess {
+    /// Independent Gaussian noise every step.
+    #[default]
+    Gaussian,
+    /// Ornstein-Uhlenbeck noise (theta 0.15, dt 0.01).
+    Ou,
+    /// Gaussian noise held for 10 steps.
+    TimeCorrelated,
 }
 
-impl PolicyActor {
-    pub fn new(policy: CpuPolicy, stochastic: bool) -> Self {
-        let (od, ad) = (policy.obs_dim(), policy.act_dim());
-        PolicyActor { policy, stochastic, nobs: vec![0.0; od], mean: vec![0.0; ad], scratch: Vec::new() }
-    }
-}
-
-impl Actor for PolicyActor {
-    fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
-        self.policy.normalize(obs, &mut self.nobs);
-        self.policy.mean(&self.nobs, &mut self.mean, &mut self.scratch);
-        if self.stochastic {
-            self.policy.sample(&self.mean, rng, out);
-        } else {
-            out.copy_from_slice(&self.mean);
-        }
-    }
-}
-
-/// Uniform actions in the box. Used alone and as the random part of epsilon-greedy.
-pub struct UniformActor {
-    pub low: Vec<f64>,
-    pub high: Vec<f64>,
-}
-
-impl Actor for UniformActor {
-    fn act(&mut self, _obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
-        for ((o, &l), &h) in out.iter_mut().zip(&self.low).zip(&self.high) {
-            *o = rng.random_range(l..h) as f32;
+impl NoiseProcess {
+    /// `inner`'s action plus this noise at scale `sigma`.
+    pub fn around<A: Actor + 'static>(self, inner: A, sigma: f64, act_dim: usize) -> Box<dyn Actor> {
+        match self {
+            NoiseProcess::Gaussian => Box::new(GaussianNoise { inner, sigma }),
+            NoiseProcess::Ou => Box::new(OrnsteinUhlenbeck::new(inner, sigma, act_dim)),
+            NoiseProcess::TimeCorrelated => Box::new(TimeCorrelated::new(inner, sigma, 10, act_dim)),
         }
     }
 }

@@ -14,6 +14,7 @@ use tch::{Kind, Tensor, nn::OptimizerConfig};
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
 use crate::nn::{RewardConfig, RewardEnsemble};
+use crate::seed::{self, Purpose};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -69,11 +70,22 @@ pub struct Pair {
 pub struct ModelReport {
     pub train_pairs: usize,
     pub val_pairs: usize,
+    #[serde(with = "crate::stats::nan_as_null")]
     pub final_loss: f64,
+    #[serde(with = "crate::stats::nan_as_null")]
     pub train_accuracy: f64,
+    #[serde(with = "crate::stats::nan_as_null")]
     pub val_accuracy: f64,
-    /// (iteration, loss, batch accuracy) every 50 iterations, for the learning-curve plot.
-    pub curve: Vec<(usize, f64, f64)>,
+    /// Every 50 iterations, for the learning-curve plot.
+    pub curve: Vec<TrexCurvePoint>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrexCurvePoint {
+    pub iteration: usize,
+    #[serde(with = "crate::stats::nan_as_null")]
+    pub loss: f64,
+    pub batch_accuracy: f64,
 }
 
 /// Which trajectory is preferred to which.
@@ -202,7 +214,7 @@ pub fn train(
     let model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
     let mut reports = Vec::new();
     for m in 0..cfg.models {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_mul(1000).wrapping_add(m as u64));
+        let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
         let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
         let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
         let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
@@ -219,7 +231,7 @@ pub fn train(
             final_loss = ce.double_value(&[]);
             if it % 50 == 0 || it + 1 == cfg.iterations {
                 let acc = lg.argmax(1, false).eq_tensor(&labels).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]);
-                curve.push((it, final_loss, acc));
+                curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
             }
         }
         reports.push(ModelReport {
@@ -234,56 +246,11 @@ pub fn train(
     Ok((model, reports))
 }
 
-/// Spearman rank correlation (average ranks for ties).
-pub fn spearman(x: &[f64], y: &[f64]) -> f64 {
-    pearson(&ranks(x), &ranks(y))
-}
-
-pub fn pearson(x: &[f64], y: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let cov: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
-    let vx: f64 = x.iter().map(|a| (a - mx).powi(2)).sum();
-    let vy: f64 = y.iter().map(|b| (b - my).powi(2)).sum();
-    cov / (vx * vy).sqrt()
-}
-
-fn ranks(v: &[f64]) -> Vec<f64> {
-    let mut idx: Vec<usize> = (0..v.len()).collect();
-    idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
-    let mut r = vec![0.0; v.len()];
-    let mut i = 0;
-    while i < idx.len() {
-        let mut j = i;
-        while j + 1 < idx.len() && v[idx[j + 1]] == v[idx[i]] {
-            j += 1;
-        }
-        for &k in &idx[i..=j] {
-            r[k] = (i + j) as f64 / 2.0;
-        }
-        i = j + 1;
-    }
-    r
-}
-
-/// Fraction of trajectory pairs (with different true returns) whose predicted order is right.
-pub fn pairwise_accuracy(pred: &[f64], truth: &[f64]) -> f64 {
-    let (mut right, mut total) = (0usize, 0usize);
-    for i in 0..pred.len() {
-        for j in i + 1..pred.len() {
-            if truth[i] != truth[j] {
-                total += 1;
-                right += usize::from((pred[i] > pred[j]) == (truth[i] > truth[j]));
-            }
-        }
-    }
-    right as f64 / total.max(1) as f64
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::data::TrajMeta;
+    use crate::stats::{pairwise_accuracy, spearman};
 
     /// Toy trajectories in a 3-d observation space whose true reward is obs[0] - obs[1];
     /// the score handed to T-REX is the true return, as T-REX's ranked checkpoints are.
@@ -363,12 +330,5 @@ mod tests {
             let (better, worse) = if p.label == 0 { (p.a.0, p.b.0) } else { (p.b.0, p.a.0) };
             assert!(better < 2 && worse >= 2);
         }
-    }
-
-    #[test]
-    fn rank_statistics() {
-        assert!((spearman(&[1.0, 2.0, 3.0], &[10.0, 20.0, 30.0]) - 1.0).abs() < 1e-12);
-        assert!((spearman(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
-        assert_eq!(pairwise_accuracy(&[1.0, 2.0, 3.0], &[1.0, 3.0, 2.0]), 2.0 / 3.0);
     }
 }

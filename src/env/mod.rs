@@ -21,6 +21,7 @@ use crate::error::{Error, Result};
 
 pub mod half_cheetah;
 pub mod hopper;
+pub mod replay;
 pub mod vec_env;
 pub mod walker2d;
 

@@ -1,4 +1,5 @@
 //! What idrex writes for outside tools: trajectories as MCAP (the rollout artifacts
-//! themselves), plots as Rerun recordings.
+//! themselves) and flat CSV/NDJSON exports of them, plots as Rerun recordings.
+pub mod export;
 pub mod mcap;
 pub mod rerun;

@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use crate::algo::noise::NoiseProcess;
 use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
 
@@ -107,8 +108,8 @@ pub struct IdrexConfig {
     pub alphas: Vec<f64>,
     /// Variant 2: Gaussian action-noise levels.
     pub sigmas: Vec<f64>,
-    /// Variant 2: the noise process: gaussian, ou or time-correlated.
-    pub action_noise: String,
+    /// Variant 2: the noise process.
+    pub action_noise: NoiseProcess,
     /// Variants 1 and 2: rollouts per level and per source policy.
     pub rollouts_per_level: usize,
     /// Variant 3: epsilon schedule for the clones and rollouts per level (1 in the original).
@@ -121,7 +122,7 @@ impl Default for IdrexConfig {
         IdrexConfig {
             alphas: (0..=10).map(|i| i as f64 * 0.1).collect(),
             sigmas: (0..=10).map(|i| i as f64 * 0.1).collect(),
-            action_noise: "gaussian".into(),
+            action_noise: NoiseProcess::Gaussian,
             rollouts_per_level: 5,
             multi_bc_schedule: (0..20).map(|i| i as f64 * 0.05).collect(),
             multi_bc_rollouts_per_level: 1,
@@ -326,35 +327,25 @@ impl Pipeline {
             ));
         }
         for (m, o) in &spec.overrides {
-            for (section, value, base) in
-                [("trex", &o.trex, serde_json::to_value(&spec.trex)), ("ppo", &o.ppo, serde_json::to_value(&spec.ppo))]
-            {
-                if let Some(v) = value {
-                    let merged = merge(base.expect("configs serialise"), v);
-                    let ok = match section {
-                        "trex" => serde_json::from_value::<TrexConfig>(merged).map(|_| ()),
-                        _ => serde_json::from_value::<PpoConfig>(merged).map(|_| ()),
-                    };
-                    ok.map_err(|e| at(&["overrides", m.name(), section], format!("overrides.{}.{section}: {e}", m.name())))?;
-                }
+            let bad = |section: &str, e: serde_json::Error| {
+                at(&["overrides", m.name(), section], format!("overrides.{}.{section}: {e}", m.name()))
+            };
+            if let Some(v) = &o.trex {
+                serde_json::from_value::<TrexConfig>(merge(serde_json::to_value(&spec.trex).expect("serialises"), v))
+                    .map_err(|e| bad("trex", e))?;
+            }
+            if let Some(v) = &o.ppo {
+                serde_json::from_value::<PpoConfig>(merge(serde_json::to_value(&spec.ppo).expect("serialises"), v))
+                    .map_err(|e| bad("ppo", e))?;
             }
         }
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
             return Err(at(&["idrex"], "idrex rollouts per level must be at least 1".into()));
         }
-        if !["gaussian", "ou", "time-correlated"].contains(&spec.idrex.action_noise.as_str()) {
-            return Err(at(
-                &["idrex", "action_noise"],
-                format!("unknown action noise '{}'; write gaussian, ou or time-correlated", spec.idrex.action_noise),
-            ));
-        }
         let base = path.parent().unwrap_or(Path::new("."));
         let store = spec.store.as_ref().map_or_else(|| PathBuf::from("artifacts"), |s| base.join(s));
         let name = spec.name.clone().unwrap_or_else(|| path.file_stem().map_or("pipeline".into(), |s| s.to_string_lossy().into_owned()));
-        let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(match env {
-            EnvId::HalfCheetah => 0.1,
-            _ => 1e-3,
-        });
+        let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         if let Some(from) = &spec.demos.from {
             let p = base.join(from);
             if !p.is_file() {
@@ -384,6 +375,14 @@ impl Pipeline {
             None => base.clone(),
             Some(v) => serde_json::from_value(merge(serde_json::to_value(base).expect("serialises"), v)).expect("validated at load"),
         }
+    }
+}
+
+/// The control-cost coefficient of the learned reward when the file gives none (D-REX's).
+pub fn default_ctrl_coeff(env: EnvId) -> f64 {
+    match env {
+        EnvId::HalfCheetah => 0.1,
+        EnvId::Hopper | EnvId::Walker2d => 1e-3,
     }
 }
 
@@ -447,5 +446,7 @@ mod tests {
         assert!(
             err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      lr: fast\n").contains("p.yaml:5:5: overrides.drex.ppo")
         );
+        let noise = err("version: 1\nenv: Hopper-v5\nidrex:\n  action_noise: pink\n");
+        assert!(noise.contains("unknown variant `pink`, expected one of `gaussian`, `ou`, `time-correlated`"), "{noise}");
     }
 }

@@ -1,11 +1,13 @@
 //! The pipeline engine: YAML experiment files ([`config`]) expand to a DAG of stage
-//! instances ([`graph`]) whose results are content-addressed artifacts in the store
-//! ([`crate::store`]); [`runner`] executes what is missing; [`stages`] are the bodies.
+//! instances ([`graph`], with iD-REX's iterations in [`idrex`]) whose results are
+//! content-addressed artifacts in the store ([`crate::store`]); [`runner`] executes what is
+//! missing; [`stage`] holds each kind's parameters, metrics and body.
 pub mod config;
 pub mod graph;
+pub mod idrex;
 pub mod plots;
 pub mod runner;
-pub mod stages;
+pub mod stage;
 
 pub use config::{Method, Pipeline};
 pub use graph::{Graph, Node, expand};

@@ -10,7 +10,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::Value;
 
 use super::graph::{Graph, Node};
-use super::stages::StageCtx;
+use super::stage::StageCtx;
 use crate::error::{Error, Result};
 use crate::store::{Manifest, Store, now_unix};
 
@@ -88,7 +88,6 @@ fn run_node(
         let started = now_unix();
         let clock = Instant::now();
         let ctx = StageCtx {
-            params: &node.params,
             seed: node.seed,
             inputs: inputs.iter().map(|(role, k)| (role.clone(), store.dir(k))).collect(),
             out: &staging.dir,
@@ -111,10 +110,10 @@ fn run_node(
         let wall_s = clock.elapsed().as_secs_f64();
         let manifest = Manifest {
             key: key.to_string(),
-            kind: node.kind.name().to_string(),
-            version: node.kind.version(),
+            kind: node.kind().name().to_string(),
+            version: node.kind().version(),
             node: node.name.clone(),
-            params: node.params.clone(),
+            params: node.params.to_json(),
             seed: node.seed,
             inputs,
             outputs: vec![],
@@ -133,7 +132,8 @@ fn run_node(
             let logs = store.root().join(".logs");
             let _ = std::fs::create_dir_all(&logs);
             let log = logs.join(format!("{}-{}.log", node.name.replace('/', "_"), &key[..12]));
-            let text = format!("node: {}\nkind: {}\nkey: {key}\nparams: {}\nerror: {e}\n", node.name, node.kind.name(), node.params);
+            let text =
+                format!("node: {}\nkind: {}\nkey: {key}\nparams: {}\nerror: {e}\n", node.name, node.kind().name(), node.params.to_json());
             let _ = std::fs::write(&log, text);
             Status::Failed { error: e.to_string(), log }
         }
@@ -219,25 +219,19 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::stages::{self, StageKind};
-    use serde_json::json;
+    use crate::pipeline::stage::{self, Params, test_value};
 
-    fn node(name: &str, value: i64, inputs: &[&str], extra: Value) -> Node {
-        let mut params = json!({"value": value});
-        for (k, v) in extra.as_object().into_iter().flatten() {
-            params[k] = v.clone();
-        }
+    fn node(name: &str, value: i64, inputs: &[&str], sleep_ms: u64, fail: bool) -> Node {
         Node {
             name: name.into(),
-            kind: StageKind::TestValue,
-            params,
+            params: Params::TestValue(test_value::Params { value, sleep_ms, fail }),
             seed: 0,
             inputs: inputs.iter().enumerate().map(|(i, s)| (format!("in{i}"), s.to_string())).collect(),
         }
     }
 
     fn body(n: &Node, ctx: &StageCtx) -> Result<Value> {
-        stages::run(n.kind, ctx)
+        stage::run(&n.params, ctx).map(|m| m.to_json())
     }
 
     fn opts(force: &[&str]) -> RunOptions {
@@ -255,10 +249,10 @@ mod tests {
         let store = Store::open(&root).unwrap();
         let g = Graph {
             nodes: vec![
-                node("a", 1, &[], json!({})),
-                node("b", 10, &["a"], json!({"sleep_ms": 50})),
-                node("c", 100, &["a"], json!({"sleep_ms": 50})),
-                node("d", 1000, &["b", "c"], json!({})),
+                node("a", 1, &[], 0, false),
+                node("b", 10, &["a"], 50, false),
+                node("c", 100, &["a"], 50, false),
+                node("d", 1000, &["b", "c"], 0, false),
             ],
         };
         let out = run(&g, &store, &opts(&[]), &body).unwrap();
@@ -273,8 +267,8 @@ mod tests {
 
         // A failing stage: its descendants are skipped, its siblings finish, its log exists.
         let mut bad = g.clone();
-        bad.nodes[1] = node("b", 11, &["a"], json!({"fail": true}));
-        bad.nodes[2] = node("c", 101, &["a"], json!({}));
+        bad.nodes[1] = node("b", 11, &["a"], 0, true);
+        bad.nodes[2] = node("c", 101, &["a"], 0, false);
         let out = run(&bad, &store, &opts(&[]), &body).unwrap();
         assert!(matches!(&out[1].status, Status::Failed { log, .. } if log.exists()));
         assert!(matches!(out[2].status, Status::Computed { .. }));

@@ -29,7 +29,7 @@ pub struct MinibatchStats {
     pub clipfrac: f64,
 }
 
-/// The loss settings of [`super::ppo::PpoConfig`] that the update needs.
+/// The loss settings of [`super::PpoConfig`] that the update needs.
 #[derive(Debug, Clone, Copy)]
 pub struct LossConfig {
     pub clip_coef: f32,

@@ -1,0 +1,88 @@
+//! The command line: clap definitions and a thin function per command, one file per command
+//! group; the work is done by library functions. `anyhow` lives here and in `main.rs` only;
+//! the library returns [`crate::Error`].
+mod env;
+mod logs;
+mod pipeline;
+mod report;
+mod store;
+mod train;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Debug, Parser)]
+#[command(name = "idrex", version, about = "Reward learning from automatically ranked demonstrations (D-REX, iD-REX)")]
+pub struct Cli {
+    /// More log output (-v info, -vv debug); RUST_LOG overrides.
+    #[arg(short, long, global = true, action = clap::ArgAction::Count)]
+    pub verbose: u8,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Drive one environment directly.
+    #[command(subcommand)]
+    Env(env::EnvCommand),
+    /// Benchmarks, reported as ratios against a baseline measured in the same run.
+    #[command(subcommand)]
+    Bench(BenchCommand),
+    /// Train a policy on the ground-truth reward.
+    #[command(subcommand)]
+    Train(train::TrainCommand),
+    /// Evaluate a saved policy: ground-truth return of its stochastic policy.
+    Eval(train::EvalArgs),
+    /// Run or inspect a pipeline file.
+    #[command(subcommand)]
+    Pipeline(pipeline::PipelineCommand),
+    /// Re-hash every artifact in the store and list the corrupt ones.
+    Verify(store::StoreArgs),
+    /// Remove artifacts that no given pipeline file references (a dry run unless --yes).
+    Gc(store::GcArgs),
+    /// Reopen MCAP rollout files.
+    #[command(subcommand)]
+    Logs(logs::LogsCommand),
+    /// Comparison tables (CSV and markdown) from the store's evaluation results.
+    Report(report::ReportArgs),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Environment steps/s next to the raw mj_step rate and Gymnasium's Python environment.
+    Env(crate::bench::EnvBenchArgs),
+    /// T-REX on epsilon-greedy rollouts of a trained policy: rank correlation of predicted and
+    /// true returns on held-out rollouts, and the training time.
+    Trex(crate::bench::TrexBenchArgs),
+}
+
+pub fn init_tracing(verbose: u8) {
+    let default = match verbose {
+        0 => "warn",
+        1 => "info",
+        _ => "debug",
+    };
+    // MuJoCo's messages go through the log facade into tracing. Its model compiler warns
+    // about a deprecated attribute in gymnasium's own XML files on every load; that is not
+    // the user's to fix, so MuJoCo is shown from `error` up unless RUST_LOG says otherwise.
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(format!("{default},mujoco=error")));
+    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    // SAFETY: called at start-up, before any thread uses MuJoCo.
+    unsafe { mujoco_rs::prelude::install_logging_hook() };
+}
+
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Env(cmd) => env::run(&cmd),
+        Command::Bench(BenchCommand::Env(args)) => crate::bench::env_bench(&args),
+        Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
+        Command::Train(cmd) => train::run(&cmd),
+        Command::Eval(args) => train::eval(&args),
+        Command::Pipeline(cmd) => pipeline::run(&cmd),
+        Command::Verify(args) => store::verify(&args),
+        Command::Gc(args) => store::gc(&args),
+        Command::Logs(cmd) => logs::run(&cmd),
+        Command::Report(args) => report::run(&args),
+    }
+}

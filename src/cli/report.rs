@@ -1,0 +1,44 @@
+//! `idrex report`: the comparison tables from the store.
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+
+use crate::store::Store;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ReportFormat {
+    Csv,
+    Md,
+    Both,
+}
+
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    #[arg(long, default_value = "artifacts")]
+    pub store: PathBuf,
+    #[arg(long, value_enum, default_value_t = ReportFormat::Both)]
+    pub format: ReportFormat,
+    #[arg(long, default_value = "report")]
+    pub out: PathBuf,
+}
+
+pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
+    let store = Store::open(&args.store)?;
+    let mut t = crate::report::build(&store)?;
+    if t.returns.height() == 0 {
+        bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store.display());
+    }
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    if args.format != ReportFormat::Md {
+        crate::report::write_csv(&mut t.returns, &args.out.join("returns.csv"))?;
+        crate::report::write_csv(&mut t.demos, &args.out.join("demos.csv"))?;
+        crate::report::write_csv(&mut t.accuracy, &args.out.join("reward_accuracy.csv"))?;
+    }
+    let md = crate::report::markdown(&t);
+    if args.format != ReportFormat::Csv {
+        std::fs::write(args.out.join("report.md"), &md)?;
+    }
+    print!("{md}");
+    Ok(())
+}

@@ -1,0 +1,21 @@
+//! `bc`: behavioural cloning of the demonstrations ([`crate::algo::bc`]).
+use super::{POLICY, StageCtx, read_rollouts};
+use crate::algo::bc::{self, BcConfig, BcReport};
+use crate::env::EnvId;
+use crate::error::Result;
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BcParams {
+    pub env: EnvId,
+    pub bc: BcConfig,
+}
+
+pub fn run(p: &BcParams, ctx: &StageCtx) -> Result<BcReport> {
+    let trajs = read_rollouts(ctx.input("demos")?)?;
+    ctx.progress.set_message("behavioural cloning");
+    let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed)?;
+    policy.env = Some(p.env.name().to_string());
+    policy.save(&ctx.out.join(POLICY), serde_json::to_value(&p.bc).unwrap_or_default())?;
+    Ok(report)
+}

@@ -1,0 +1,109 @@
+//! Where the demonstrations come from: a demonstrator trained with PPO on the true reward
+//! (`demonstrator`) and its rollouts (`demos`), or a file of someone else's
+//! (`demos-import`: MCAP in our schema, or NPZ as the original D-REX code stored them).
+use std::path::PathBuf;
+
+use super::{RolloutSummary, StageCtx, load_policy_for, ppo_progress};
+use crate::algo::ppo::{self, PpoConfig};
+use crate::data::TrajMeta;
+use crate::env::{Env, EnvId};
+use crate::error::{Error, Result};
+use crate::log::mcap;
+use crate::rollout::{self, PolicyActor};
+use crate::seed::Purpose;
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DemonstratorParams {
+    pub env: EnvId,
+    pub ppo: PpoConfig,
+    /// Stop once an evaluation reaches this mean return.
+    pub target_return: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DemonstratorMetrics {
+    pub steps: usize,
+    /// The step at which an evaluation reached the target, if one did.
+    pub stopped_at_target: Option<usize>,
+    pub wall_s: f64,
+    pub final_eval: Option<f64>,
+}
+
+pub fn demonstrator(p: &DemonstratorParams, ctx: &StageCtx) -> Result<DemonstratorMetrics> {
+    let mut cfg = p.ppo.clone();
+    cfg.threads = ctx.threads;
+    let mut show = ppo_progress(ctx, cfg.total_steps);
+    let mut reached = None;
+    let mut on_update = |u: &ppo::PpoProgress| {
+        show(u);
+        match (p.target_return, u.eval) {
+            (Some(t), Some(e)) if e.mean >= t => {
+                reached = Some(u.global_step);
+                false
+            }
+            _ => true,
+        }
+    };
+    let res = ppo::train(p.env, &cfg, ppo::RewardSource::GroundTruth, ctx.seed, &mut on_update, None)?;
+    res.policy.save(&ctx.out.join(super::POLICY), serde_json::to_value(&cfg).unwrap_or_default())?;
+    let last = res.curve.last();
+    Ok(DemonstratorMetrics {
+        steps: last.map_or(0, |u| u.global_step),
+        stopped_at_target: reached,
+        wall_s: res.wall_s,
+        final_eval: last.and_then(|u| u.eval.map(|e| e.mean)),
+    })
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DemosParams {
+    pub env: EnvId,
+    pub episodes: usize,
+}
+
+/// Rollouts of the demonstrator's stochastic policy, episode k from `derive(seed, Episode, k)`.
+pub fn demos(p: &DemosParams, ctx: &StageCtx) -> Result<RolloutSummary> {
+    let mut env = Env::new(p.env)?;
+    let policy = load_policy_for(ctx.input("policy")?, &env, p.env)?;
+    let meta = TrajMeta { source: "demonstrator".into(), ..Default::default() };
+    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes, ctx.seed, Purpose::Episode, &meta);
+    ctx.write_rollouts(p.env, &trajs, None)?;
+    Ok(RolloutSummary::of(&trajs))
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ImportParams {
+    pub env: EnvId,
+    pub path: PathBuf,
+    /// The file's content, not its path, identifies the demonstrations in the key.
+    pub sha256: String,
+}
+
+pub fn import(p: &ImportParams, ctx: &StageCtx) -> Result<RolloutSummary> {
+    let trajs = if p.path.extension().is_some_and(|e| e == "mcap") {
+        mcap::read(&p.path)?.trajectories
+    } else {
+        crate::data::npz::read(&p.path, "imported")?
+    };
+    let env = Env::new(p.env)?;
+    if let Some(t) = trajs.first()
+        && (t.obs_dim, t.act_dim) != (env.obs_dim(), env.act_dim())
+    {
+        return Err(Error::file(
+            &p.path,
+            format!(
+                "has {}-dim observations and {}-dim actions; {} has {} and {}",
+                t.obs_dim,
+                t.act_dim,
+                p.env,
+                env.obs_dim(),
+                env.act_dim()
+            ),
+        ));
+    }
+    ctx.write_rollouts(p.env, &trajs, None)?;
+    Ok(RolloutSummary::of(&trajs))
+}

@@ -1,0 +1,253 @@
+//! The stage kinds a pipeline is made of. Each kind has one file here (the iD-REX rollout
+//! stages are in [`super::idrex`]) holding its typed parameters, its typed metrics and its
+//! body. This root keeps the kind enum, the context a body gets and the dispatch.
+//!
+//! A stage reads its inputs' artifact directories and writes into its own staging
+//! directory; the runner publishes it. A node's parameters are a [`Params`] value; their
+//! canonical JSON goes into the node's key, and its metrics are stored in the manifest as
+//! JSON and read back through the same [`Metrics`] structs by plots and the report.
+//!
+//! | kind | version | inputs | outputs | file |
+//! |---|---|---|---|---|
+//! | demonstrator | 1 | - | policy/ | demos.rs |
+//! | demos | 1 | policy | rollouts.mcap | demos.rs |
+//! | demos-import | 1 | - (a file) | rollouts.mcap | demos.rs |
+//! | bc | 1 | demos | policy/ | bc.rs |
+//! | noise-rollouts | 1 | policy | rollouts.mcap | noise.rs |
+//! | trex | 1 | set0..setN, demos | reward/ | trex.rs |
+//! | ppo | 1 | reward | policy/, curve.csv | ppo.rs |
+//! | eval | 1 | policy, reward?, demos | rollouts.mcap | eval.rs |
+//! | interpolation-rollouts | 1 | policy<r>, older<r> | rollouts.mcap | idrex/interpolation.rs |
+//! | action-noise-rollouts | 1 | policy<r> | rollouts.mcap | idrex/action_noise.rs |
+//! | multi-bc-rollouts | 1 | policy<r>, reward, baseline | rollouts.mcap | idrex/multi_bc.rs |
+pub mod bc;
+pub mod demos;
+pub mod eval;
+pub mod noise;
+pub mod ppo;
+pub mod test_value;
+pub mod trex;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::idrex;
+use crate::data::Trajectory;
+use crate::env::{Env, EnvId};
+use crate::error::{Error, Result};
+use crate::log::mcap;
+use crate::nn::ActorCritic;
+use crate::stats::ReturnStats;
+
+pub const ROLLOUTS: &str = "rollouts.mcap";
+pub const POLICY: &str = "policy";
+pub const REWARD: &str = "reward";
+
+/// Declares the stage kinds once: the kind enum, the typed parameters and metrics of each,
+/// and the dispatch to its body, so that adding a kind is one line here plus its file.
+macro_rules! stage_kinds {
+    ($($kind:ident = $name:literal: $params:ty => $metrics:ty, $body:path;)*) => {
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+        pub enum StageKind {
+            $(#[serde(rename = $name)] $kind,)*
+        }
+
+        impl StageKind {
+            pub const ALL: &[StageKind] = &[$(StageKind::$kind,)*];
+
+            pub fn name(self) -> &'static str {
+                match self { $(StageKind::$kind => $name,)* }
+            }
+        }
+
+        /// A node's parameters, typed per stage kind.
+        #[derive(Debug, Clone, PartialEq)]
+        pub enum Params {
+            $($kind($params),)*
+        }
+
+        impl Params {
+            pub fn kind(&self) -> StageKind {
+                match self { $(Params::$kind(_) => StageKind::$kind,)* }
+            }
+
+            /// The canonical JSON of the parameters: what goes into the key and the manifest.
+            pub fn to_json(&self) -> Value {
+                match self { $(Params::$kind(p) => serde_json::to_value(p),)* }.expect("parameters serialise")
+            }
+
+            pub fn from_json(kind: StageKind, v: &Value) -> Result<Self> {
+                Ok(match kind { $(StageKind::$kind => Params::$kind(parse(kind, "params", v)?),)* })
+            }
+        }
+
+        /// What a stage reports, typed per stage kind; stored in the manifest as JSON.
+        #[derive(Debug, Clone, PartialEq)]
+        pub enum Metrics {
+            $($kind($metrics),)*
+        }
+
+        impl Metrics {
+            pub fn to_json(&self) -> Value {
+                match self { $(Metrics::$kind(m) => serde_json::to_value(m),)* }.expect("metrics serialise")
+            }
+
+            pub fn from_json(kind: StageKind, v: &Value) -> Result<Self> {
+                Ok(match kind { $(StageKind::$kind => Metrics::$kind(parse(kind, "metrics", v)?),)* })
+            }
+        }
+
+        /// Runs a stage body.
+        pub fn run(params: &Params, ctx: &StageCtx) -> Result<Metrics> {
+            match params { $(Params::$kind(p) => $body(p, ctx).map(Metrics::$kind),)* }
+        }
+    };
+}
+
+stage_kinds! {
+    Demonstrator = "demonstrator": demos::DemonstratorParams => demos::DemonstratorMetrics, demos::demonstrator;
+    Demos = "demos": demos::DemosParams => RolloutSummary, demos::demos;
+    DemosImport = "demos-import": demos::ImportParams => RolloutSummary, demos::import;
+    Bc = "bc": bc::BcParams => crate::algo::bc::BcReport, bc::run;
+    NoiseRollouts = "noise-rollouts": noise::NoiseParams => noise::NoiseMetrics, noise::run;
+    Trex = "trex": trex::TrexParams => trex::TrexMetrics, trex::run;
+    Ppo = "ppo": ppo::PpoParams => ppo::PpoMetrics, ppo::run;
+    Eval = "eval": eval::EvalParams => eval::EvalMetrics, eval::run;
+    InterpolationRollouts = "interpolation-rollouts": idrex::interpolation::Params => DegradationMetrics, idrex::interpolation::run;
+    ActionNoiseRollouts = "action-noise-rollouts": idrex::action_noise::Params => DegradationMetrics, idrex::action_noise::run;
+    MultiBcRollouts = "multi-bc-rollouts": idrex::multi_bc::Params => idrex::multi_bc::Metrics, idrex::multi_bc::run;
+    TestValue = "test-value": test_value::Params => test_value::Metrics, test_value::run;
+}
+
+fn parse<T: serde::de::DeserializeOwned>(kind: StageKind, what: &str, v: &Value) -> Result<T> {
+    T::deserialize(v).map_err(|e| Error::Invalid(format!("stored {} {what} do not match this idrex version: {e}", kind.name())))
+}
+
+impl StageKind {
+    /// Bump when a change to the stage would change its results.
+    pub fn version(self) -> u32 {
+        // All at 1. (BC briefly ran on the fused kernel: measured idle, libtorch's GEMMs are
+        // 2.8x faster at 4 x 256 units, so it went back, and with it the version.)
+        1
+    }
+
+    pub fn parse(name: &str) -> Option<StageKind> {
+        StageKind::ALL.iter().copied().find(|k| k.name() == name)
+    }
+}
+
+/// A stored artifact read back through its stage's types.
+#[derive(Debug, Clone)]
+pub struct Typed {
+    pub params: Params,
+    pub metrics: Metrics,
+}
+
+impl Typed {
+    pub fn of(m: &crate::store::Manifest) -> Result<Typed> {
+        let kind =
+            StageKind::parse(&m.kind).ok_or_else(|| Error::Invalid(format!("artifact {}: unknown stage kind '{}'", m.key, m.kind)))?;
+        Ok(Typed { params: Params::from_json(kind, &m.params)?, metrics: Metrics::from_json(kind, &m.metrics)? })
+    }
+}
+
+/// What a stage body gets besides its parameters.
+pub struct StageCtx<'a> {
+    pub seed: u64,
+    /// Input role -> artifact directory.
+    pub inputs: BTreeMap<String, PathBuf>,
+    pub out: &'a Path,
+    pub threads: usize,
+    pub progress: &'a indicatif::ProgressBar,
+}
+
+impl StageCtx<'_> {
+    pub fn input(&self, role: &str) -> Result<&Path> {
+        self.inputs.get(role).map(PathBuf::as_path).ok_or_else(|| Error::Invalid(format!("stage has no input '{role}'")))
+    }
+
+    /// Inputs named `<prefix>0`, `<prefix>1`, ... in order.
+    pub fn numbered(&self, prefix: &str) -> Vec<&Path> {
+        (0..).map_while(|i| self.inputs.get(&format!("{prefix}{i}")).map(PathBuf::as_path)).collect()
+    }
+
+    pub fn write_rollouts(&self, env: EnvId, trajs: &[Trajectory], learned: Option<&[Vec<f64>]>) -> Result<()> {
+        let dt = Env::new(env)?.dt();
+        mcap::write(&self.out.join(ROLLOUTS), env.name(), dt, trajs, learned)
+    }
+}
+
+pub fn read_rollouts(dir: &Path) -> Result<Vec<Trajectory>> {
+    Ok(mcap::read(&dir.join(ROLLOUTS))?.trajectories)
+}
+
+pub fn load_policy(dir: &Path) -> Result<ActorCritic> {
+    ActorCritic::load(&dir.join(POLICY))
+}
+
+/// A policy stored in `dir`, checked against the environment it will act in.
+pub fn load_policy_for(dir: &Path, env: &Env, id: EnvId) -> Result<ActorCritic> {
+    let p = load_policy(dir)?;
+    p.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
+    Ok(p)
+}
+
+/// The returns of a rollout set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RolloutSummary {
+    #[serde(flatten)]
+    pub stats: ReturnStats,
+    pub returns: Vec<f64>,
+    pub lengths: Vec<usize>,
+}
+
+impl RolloutSummary {
+    pub fn of(trajs: &[Trajectory]) -> Self {
+        let returns: Vec<f64> = trajs.iter().map(Trajectory::ret).collect();
+        RolloutSummary { stats: ReturnStats::of(&returns), returns, lengths: trajs.iter().map(Trajectory::len).collect() }
+    }
+}
+
+/// Mean and std of the returns at one noise level: a point of a degradation curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DegradationLevel {
+    pub noise: f64,
+    pub mean: f64,
+    pub std: f64,
+    pub n: usize,
+}
+
+/// Per-noise-level mean and std of returns, in increasing noise.
+pub fn degradation(trajs: &[Trajectory]) -> Vec<DegradationLevel> {
+    let mut levels: BTreeMap<String, (f64, Vec<f64>)> = BTreeMap::new();
+    for t in trajs {
+        levels.entry(format!("{:.4}", t.meta.noise)).or_insert_with(|| (t.meta.noise, Vec::new())).1.push(t.ret());
+    }
+    levels
+        .into_values()
+        .map(|(noise, v)| {
+            let s = ReturnStats::of(&v);
+            DegradationLevel { noise, mean: s.mean, std: s.std, n: v.len() }
+        })
+        .collect()
+}
+
+/// The metrics of a rollout stage whose sets are ranked by noise level.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DegradationMetrics {
+    pub degradation: Vec<DegradationLevel>,
+}
+
+/// The progress callback PPO-based stages give [`crate::algo::ppo::train`].
+pub fn ppo_progress<'a>(ctx: &'a StageCtx<'a>, total: usize) -> impl FnMut(&crate::algo::ppo::PpoProgress) + 'a {
+    ctx.progress.set_length(total as u64);
+    move |p| {
+        ctx.progress.set_position(p.global_step as u64);
+        if let Some(r) = p.episodic_return {
+            ctx.progress.set_message(format!("return {r:.0}"));
+        }
+    }
+}

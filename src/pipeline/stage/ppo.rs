@@ -1,0 +1,56 @@
+//! `ppo`: one RL run on a learned reward ([`crate::algo::ppo`]); the final policy and its
+//! learning curve.
+use super::{POLICY, REWARD, StageCtx, ppo_progress};
+use crate::algo::ppo::{self, PpoConfig};
+use crate::env::EnvId;
+use crate::error::Result;
+use crate::nn::RewardEnsemble;
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PpoParams {
+    pub env: EnvId,
+    pub ppo: PpoConfig,
+}
+
+/// One point of the learning curve: the mean true and learned returns of the training
+/// episodes that ended in an update.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CurvePoint {
+    pub step: usize,
+    pub true_return: Option<f64>,
+    pub learned_return: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PpoMetrics {
+    pub wall_s: f64,
+    pub steps_per_s: f64,
+    pub curve: Vec<CurvePoint>,
+}
+
+pub const CURVE: &str = "curve.csv";
+
+pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
+    let mut cfg = p.ppo.clone();
+    cfg.threads = ctx.threads;
+    let reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    let mut show = ppo_progress(ctx, cfg.total_steps);
+    let mut on_update = |u: &ppo::PpoProgress| {
+        show(u);
+        true
+    };
+    let res = ppo::train(p.env, &cfg, ppo::RewardSource::Learned(reward), ctx.seed, &mut on_update, None)?;
+    res.policy.save(&ctx.out.join(POLICY), serde_json::to_value(&cfg).unwrap_or_default())?;
+    ppo::write_curve(&ctx.out.join(CURVE), &res.curve)?;
+    let steps = res.curve.last().map_or(0, |u| u.global_step);
+    Ok(PpoMetrics {
+        wall_s: res.wall_s,
+        steps_per_s: steps as f64 / res.wall_s,
+        curve: res
+            .curve
+            .iter()
+            .map(|u| CurvePoint { step: u.global_step, true_return: u.episodic_return, learned_return: u.learned_return })
+            .collect(),
+    })
+}

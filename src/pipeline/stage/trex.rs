@@ -1,0 +1,98 @@
+//! `trex`: a reward ensemble learned from every ranked rollout set so far
+//! ([`crate::algo::trex`]). Within a set lower noise ranks higher; comparisons stay within
+//! a set (and, where the set asks, within one source group: one clone, one source policy);
+//! with `cross_level`, every trajectory of a later iD-REX iteration ranks above every
+//! earlier one (the report's equation 8).
+use super::{REWARD, StageCtx, read_rollouts};
+use crate::algo::trex::{self, ModelReport, Ranking, TrexConfig};
+use crate::data::Trajectory;
+use crate::env::EnvId;
+use crate::error::Result;
+use crate::stats::{nan_as_null, pearson, spearman};
+
+/// How one ranked input set takes part.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RankedSet {
+    /// The iD-REX iteration that produced it (0: D-REX's noise rollouts).
+    pub level: usize,
+    /// Compare only trajectories of the same group (multi-BC's clones).
+    pub same_group: bool,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrexParams {
+    pub env: EnvId,
+    pub trex: TrexConfig,
+    pub ctrl_coeff: f64,
+    /// One entry per input `set<i>`, in order.
+    pub sets: Vec<RankedSet>,
+    pub cross_level: bool,
+}
+
+/// Predicted against true returns of a set of trajectories.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Scored {
+    pub predicted: Vec<f64>,
+    #[serde(rename = "true")]
+    pub truth: Vec<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrainSet {
+    #[serde(flatten)]
+    pub scored: Scored,
+    pub noise: Vec<f64>,
+    pub level: Vec<usize>,
+    #[serde(with = "nan_as_null")]
+    pub spearman: f64,
+    #[serde(with = "nan_as_null")]
+    pub pearson: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrexMetrics {
+    pub models: Vec<ModelReport>,
+    pub train_set: TrainSet,
+    pub demos: Scored,
+    /// Mean validation pair accuracy over the models.
+    #[serde(with = "nan_as_null")]
+    pub val_accuracy: f64,
+}
+
+pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
+    let mut trajs = Vec::new();
+    let mut ranking = Ranking { same_group: true, cross_level: p.cross_level, ..Default::default() };
+    for (i, dir) in ctx.numbered("set").into_iter().enumerate() {
+        let set = p.sets.get(i).copied().unwrap_or(RankedSet { level: 0, same_group: false });
+        let grouped = set.same_group || p.trex.same_group;
+        for t in read_rollouts(dir)? {
+            ranking.scores.push(-t.meta.noise);
+            ranking.groups.push(i * 10_000 + if grouped || set.level > 0 { t.meta.group } else { 0 });
+            ranking.levels.push(set.level);
+            trajs.push(t);
+        }
+    }
+    ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
+    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, p.ctrl_coeff, ctx.seed)?;
+    model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
+    let score = |ts: &[Trajectory]| Scored {
+        predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
+        truth: ts.iter().map(Trajectory::ret).collect(),
+    };
+    let train = score(&trajs);
+    let demos = score(&read_rollouts(ctx.input("demos")?)?);
+    Ok(TrexMetrics {
+        val_accuracy: reports.iter().map(|r| r.val_accuracy).sum::<f64>() / reports.len() as f64,
+        models: reports,
+        train_set: TrainSet {
+            spearman: spearman(&train.predicted, &train.truth),
+            pearson: pearson(&train.predicted, &train.truth),
+            noise: trajs.iter().map(|t| t.meta.noise).collect(),
+            level: ranking.levels,
+            scored: train,
+        },
+        demos,
+    })
+}
