@@ -227,9 +227,8 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
     let held = eps_rollouts(&mut env, &policy, args.held_out_per_level, args.seed + 1);
     let cfg = trex::TrexConfig { iterations: args.iterations, ..Default::default() };
     let ranking = trex::Ranking::by_score(train.iter().map(|t| -t.meta.noise).collect());
-    let ctrl = crate::pipeline::config::default_ctrl_coeff(id);
     let start = Instant::now();
-    let (model, reports) = trex::train(&train, &ranking, &cfg, ctrl, args.seed)?;
+    let (model, reports) = trex::train(&train, &ranking, &cfg, args.seed)?;
     let secs = start.elapsed().as_secs_f64();
     let pred: Vec<f64> = held.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
     let truth: Vec<f64> = held.iter().map(|t| t.ret()).collect();

@@ -1,15 +1,146 @@
 //! `idrex report`: the report's comparison tables, built with polars from the store's
 //! manifests. Per environment and method: mean ± std of the ground-truth return over all
-//! R runs x 20 episodes, the best average of the R runs (the report's headline figure), and
-//! the demonstrations' average and best; next to them the reward-accuracy figures the report
-//! lacked (Pearson and Spearman correlation of predicted against true return on unseen
-//! evaluation rollouts, and pairwise ranking accuracy).
+//! R runs x 20 episodes, the best average of the R runs, and the demonstrations' average and
+//! best; the reward-accuracy figures the report lacked (Pearson and Spearman correlation of
+//! predicted against true return on unseen evaluation rollouts, and pairwise ranking
+//! accuracy); and the same return under three protocols ([`Protocol`]), each with a 95 %
+//! bootstrap confidence interval over runs.
+use std::collections::BTreeMap;
+
 use polars::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
+use crate::pipeline::stage::eval::CheckpointEval;
 use crate::pipeline::stage::{Metrics, Params, Typed};
+use crate::stats::{ReturnStats, bootstrap_ci};
 use crate::store::Store;
+
+/// Which policy of each PPO run a figure is measured on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Protocol {
+    /// The policy at the end of training.
+    Final,
+    /// The checkpoint whose true return, pooled over the runs, is highest: the paper's
+    /// protocol (and the original D-REX code's), a choice made with the ground truth.
+    BestByGroundTruth,
+    /// The checkpoint whose pessimistic learned return (the ensemble's most pessimistic
+    /// member, in units of the demonstrations), pooled over the runs, is highest: a choice a
+    /// user without the true reward can make.
+    GroundTruthFree,
+}
+
+impl Protocol {
+    pub const ALL: [Protocol; 3] = [Protocol::Final, Protocol::BestByGroundTruth, Protocol::GroundTruthFree];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Final => "final",
+            Protocol::BestByGroundTruth => "best-by-ground-truth",
+            Protocol::GroundTruthFree => "ground-truth-free",
+        }
+    }
+
+    fn title(self) -> &'static str {
+        match self {
+            Protocol::Final => "final policy",
+            Protocol::BestByGroundTruth => "best checkpoint, SELECTED WITH THE GROUND-TRUTH REWARD (the paper's protocol)",
+            Protocol::GroundTruthFree => "checkpoint chosen without the ground truth (highest pessimistic learned return)",
+        }
+    }
+}
+
+/// Bootstrap resamples for the confidence intervals.
+const RESAMPLES: usize = 10_000;
+
+/// One evaluated run: its final policy's returns and its checkpoints.
+struct RunEval {
+    run: usize,
+    final_returns: Vec<f64>,
+    checkpoints: Vec<CheckpointEval>,
+}
+
+/// One cell of a protocol table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProtocolRow {
+    pub env: String,
+    pub pipeline: String,
+    pub method: String,
+    pub protocol: Protocol,
+    /// The chosen checkpoint's global step (None for the final policy or without checkpoints).
+    pub step: Option<usize>,
+    pub stats: ReturnStats,
+    pub runs: usize,
+    pub ci: (f64, f64),
+    /// Best-by-ground-truth mean minus this one (ground-truth-free rows only).
+    pub gap_to_best: Option<f64>,
+}
+
+/// The steps every run has a checkpoint at.
+fn common_steps(runs: &[RunEval]) -> Vec<usize> {
+    let mut steps: Vec<usize> = runs.first().map(|r| r.checkpoints.iter().map(|c| c.step).collect()).unwrap_or_default();
+    steps.retain(|s| runs.iter().all(|r| r.checkpoints.iter().any(|c| c.step == *s)));
+    steps
+}
+
+fn at(r: &RunEval, step: usize) -> &CheckpointEval {
+    r.checkpoints.iter().find(|c| c.step == step).expect("a common step")
+}
+
+/// The step maximising `score` (the earliest on ties), if any.
+fn argmax(steps: &[usize], score: impl Fn(usize) -> Option<f64>) -> Option<usize> {
+    let mut best: Option<(usize, f64)> = None;
+    for &s in steps {
+        let Some(v) = score(s) else { return None };
+        if best.is_none_or(|(_, b)| v > b) {
+            best = Some((s, v));
+        }
+    }
+    best.map(|(s, _)| s)
+}
+
+/// The three protocols' rows of one (env, pipeline, method).
+fn protocol_rows(env: &str, pipeline: &str, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
+    let row = |protocol, step: Option<usize>, per_run: Vec<Vec<f64>>| {
+        let pooled: Vec<f64> = per_run.iter().flatten().copied().collect();
+        let run_means: Vec<f64> = per_run.iter().map(|r| ReturnStats::of(r).mean).collect();
+        ProtocolRow {
+            env: env.into(),
+            pipeline: pipeline.into(),
+            method: method.into(),
+            protocol,
+            step,
+            stats: ReturnStats::of(&pooled),
+            runs: runs.len(),
+            ci: bootstrap_ci(&run_means, RESAMPLES, 0),
+            gap_to_best: None,
+        }
+    };
+    let at_step = |step: usize| runs.iter().map(|r| at(r, step).returns.clone()).collect::<Vec<_>>();
+    let final_row = row(Protocol::Final, None, runs.iter().map(|r| r.final_returns.clone()).collect());
+    let steps = common_steps(runs);
+    let mean_of = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    let best = argmax(&steps, |s| Some(mean_of(at_step(s).concat())));
+    let free = argmax(&steps, |s| runs.iter().map(|r| at(r, s).learned.map(|l| l.pessimistic)).collect::<Option<Vec<_>>>().map(mean_of));
+    let mut out = vec![final_row.clone()];
+    let best_row = match best {
+        Some(s) => row(Protocol::BestByGroundTruth, Some(s), at_step(s)),
+        // Without checkpoints (BC) the final policy is the only candidate.
+        None => ProtocolRow { protocol: Protocol::BestByGroundTruth, ..final_row.clone() },
+    };
+    let mut free_row = match (free, best) {
+        (Some(s), _) => row(Protocol::GroundTruthFree, Some(s), at_step(s)),
+        (None, None) => ProtocolRow { protocol: Protocol::GroundTruthFree, ..final_row.clone() },
+        // Checkpoints without learned scores: nothing to choose with.
+        (None, Some(_)) => return vec![final_row, best_row],
+    };
+    if free.is_some() {
+        free_row.gap_to_best = Some(best_row.stats.mean - free_row.stats.mean);
+    }
+    out.push(best_row);
+    out.push(free_row);
+    out
+}
 
 fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
@@ -21,6 +152,8 @@ struct Long {
     episodes: DataFrame,
     demos: DataFrame,
     accuracy: DataFrame,
+    /// (env, pipeline, method label) -> its evaluated runs.
+    runs: BTreeMap<(String, String, String), Vec<RunEval>>,
 }
 
 fn collect(store: &Store) -> Result<Long> {
@@ -28,6 +161,7 @@ fn collect(store: &Store) -> Result<Long> {
     let (mut d_env, mut d_pipeline, mut d_ret) = (vec![], vec![], vec![]);
     let (mut a_env, mut a_method, mut a_pearson, mut a_spearman, mut a_pairwise) = (vec![], vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
+    let mut runs: BTreeMap<(String, String, String), Vec<RunEval>> = BTreeMap::new();
     for m in store.manifests()? {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
@@ -49,6 +183,11 @@ fn collect(store: &Store) -> Result<Long> {
             run.push(p.run as u32);
             ret.push(r);
         }
+        runs.entry((e.clone(), p.pipeline.clone(), label.clone())).or_default().push(RunEval {
+            run: p.run,
+            final_returns: x.summary.returns.clone(),
+            checkpoints: x.checkpoints.clone(),
+        });
         if let Some(acc) = &x.reward {
             a_env.push(e.clone());
             a_method.push(label.clone());
@@ -86,12 +225,15 @@ fn collect(store: &Store) -> Result<Long> {
             Column::new("spearman".into(), a_spearman),
             Column::new("pairwise_accuracy".into(), a_pairwise),
         ])?,
+        runs,
     })
 }
 
 /// The tables: returns per (env, pipeline, method) and reward accuracy per (env, method).
 pub struct Tables {
     pub returns: DataFrame,
+    /// One row per (env, pipeline, method, protocol).
+    pub protocols: Vec<ProtocolRow>,
     /// (env, pipeline, method, run) of every evaluated run, to name missing runs.
     pub runs: DataFrame,
     pub demos: DataFrame,
@@ -99,7 +241,12 @@ pub struct Tables {
 }
 
 pub fn build(store: &Store) -> Result<Tables> {
-    let long = collect(store)?;
+    let mut long = collect(store)?;
+    let mut protocols = Vec::new();
+    for ((env, pipeline, method), runs) in &mut long.runs {
+        runs.sort_by_key(|r| r.run);
+        protocols.extend(protocol_rows(env, pipeline, method, runs));
+    }
     let keys = [col("env"), col("pipeline"), col("method")];
     let per_run = long
         .episodes
@@ -142,7 +289,7 @@ pub fn build(store: &Store) -> Result<Tables> {
         .sort(["env", "method"], Default::default())
         .collect()
         .map_err(pe)?;
-    Ok(Tables { returns, runs, demos, accuracy })
+    Ok(Tables { returns, protocols, runs, demos, accuracy })
 }
 
 fn cell_f(df: &DataFrame, name: &str, i: usize) -> Option<f64> {
@@ -218,7 +365,61 @@ pub fn markdown(t: &Tables) -> String {
             cell_f(&t.accuracy, "runs", i).unwrap_or(0.0)
         ));
     }
+    out.push_str(&protocols_markdown(&t.protocols));
     out
+}
+
+/// One table per protocol, in the paper's layout; each cell: mean ± std over runs x
+/// episodes, the 95 % bootstrap interval of the mean over runs, the checkpoint's step.
+fn protocols_markdown(rows: &[ProtocolRow]) -> String {
+    let mut out = String::from(
+        "\n## Three protocols (mean ± std over runs x episodes [95 % bootstrap CI of the mean over runs] @ checkpoint step)\n",
+    );
+    let mut groups: Vec<(&str, &str)> = rows.iter().map(|r| (r.env.as_str(), r.pipeline.as_str())).collect();
+    groups.dedup();
+    for protocol in Protocol::ALL {
+        out.push_str(&format!(
+            "\n### {}\n\n| env | pipeline | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|\n",
+            protocol.title()
+        ));
+        for (env, pipeline) in &groups {
+            out.push_str(&format!("| {env} | {pipeline} |"));
+            for m in Method::ALL {
+                let cell = rows.iter().find(|r| r.env == *env && r.pipeline == *pipeline && r.method == m.name() && r.protocol == protocol);
+                out.push_str(&match cell {
+                    None => " missing |".to_string(),
+                    Some(r) => {
+                        let step = r.step.map_or(String::new(), |s| format!(" @{s}"));
+                        let gap = r.gap_to_best.map_or(String::new(), |g| format!("; {g:.1} below the best"));
+                        format!(" {:.1} ± {:.1} [{:.1}, {:.1}]{step}{gap} |", r.stats.mean, r.stats.std, r.ci.0, r.ci.1)
+                    }
+                });
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The protocol rows as a table (`protocols.csv`).
+pub fn protocols_frame(rows: &[ProtocolRow]) -> Result<DataFrame> {
+    let s = |f: &dyn Fn(&ProtocolRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
+    let x = |f: &dyn Fn(&ProtocolRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    DataFrame::new_infer_height(vec![
+        Column::new("env".into(), s(&|r| r.env.clone())),
+        Column::new("pipeline".into(), s(&|r| r.pipeline.clone())),
+        Column::new("method".into(), s(&|r| r.method.clone())),
+        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
+        Column::new("step".into(), rows.iter().map(|r| r.step.map(|v| v as u64)).collect::<Vec<_>>()),
+        Column::new("mean".into(), x(&|r| r.stats.mean)),
+        Column::new("std".into(), x(&|r| r.stats.std)),
+        Column::new("episodes".into(), rows.iter().map(|r| r.stats.episodes as u64).collect::<Vec<_>>()),
+        Column::new("runs".into(), rows.iter().map(|r| r.runs as u64).collect::<Vec<_>>()),
+        Column::new("ci_low".into(), x(&|r| r.ci.0)),
+        Column::new("ci_high".into(), x(&|r| r.ci.1)),
+        Column::new("gap_to_best".into(), rows.iter().map(|r| r.gap_to_best).collect::<Vec<_>>()),
+    ])
+    .map_err(pe)
 }
 
 pub fn write_csv(df: &mut DataFrame, path: &std::path::Path) -> Result<()> {

@@ -36,6 +36,23 @@ pub fn mean(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
 
+/// A 95 % percentile-bootstrap confidence interval of the mean of `values` (rliable's
+/// practice for few runs: resample the runs, not the episodes), from `resamples` resamples
+/// drawn with a fixed seed so that a report is reproducible.
+pub fn bootstrap_ci(values: &[f64], resamples: usize, seed: u64) -> (f64, f64) {
+    use rand::{Rng, SeedableRng};
+    if values.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut means: Vec<f64> = (0..resamples.max(1))
+        .map(|_| (0..values.len()).map(|_| values[rng.random_range(0..values.len())]).sum::<f64>() / values.len() as f64)
+        .collect();
+    means.sort_by(f64::total_cmp);
+    let at = |q: f64| means[((q * means.len() as f64) as usize).min(means.len() - 1)];
+    (at(0.025), at(0.975))
+}
+
 /// Spearman rank correlation (average ranks for ties).
 pub fn spearman(x: &[f64], y: &[f64]) -> f64 {
     pearson(&ranks(x), &ranks(y))
@@ -107,5 +124,15 @@ mod tests {
         assert_eq!(pairwise_accuracy(&[1.0, 2.0, 3.0], &[1.0, 3.0, 2.0]), 2.0 / 3.0);
         let s = ReturnStats::of(&[1.0, 3.0]);
         assert_eq!((s.mean, s.std, s.min, s.max, s.episodes), (2.0, 1.0, 1.0, 3.0, 2));
+    }
+
+    #[test]
+    fn bootstrap_interval_of_the_mean() {
+        assert_eq!(bootstrap_ci(&[5.0, 5.0, 5.0], 1000, 0), (5.0, 5.0));
+        // Three runs 0, 1, 2: resampled means range over k/3; the 95 % interval is close to
+        // the extremes but inside them.
+        let (lo, hi) = bootstrap_ci(&[0.0, 1.0, 2.0], 10_000, 0);
+        assert!((0.0..=1.0).contains(&lo) && (1.0..=2.0).contains(&hi) && lo < 0.5 && hi > 1.5, "{lo} {hi}");
+        assert_eq!(bootstrap_ci(&[0.0, 1.0, 2.0], 10_000, 0), (lo, hi), "seeded");
     }
 }

@@ -8,7 +8,7 @@ use tch::{Kind, Tensor, nn::OptimizerConfig};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::{ActorCritic, PolicyConfig};
+use crate::nn::{ActorCritic, PolicyConfig, WeightInit};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -22,11 +22,21 @@ pub struct BcConfig {
     pub l2: f64,
     /// Fraction of the steps held out for validation.
     pub val_fraction: f64,
+    /// Initialisation of the network.
+    pub init: WeightInit,
 }
 
 impl Default for BcConfig {
     fn default() -> Self {
-        BcConfig { hidden: vec![256; 4], lr: 1e-4, batch_size: 128, iterations: 50_000, l2: 1e-3, val_fraction: 0.2 }
+        BcConfig {
+            hidden: vec![256; 4],
+            lr: 1e-4,
+            batch_size: 128,
+            iterations: 50_000,
+            l2: 1e-3,
+            val_fraction: 0.2,
+            init: WeightInit::TorchDefault,
+        }
     }
 }
 
@@ -35,7 +45,10 @@ pub struct BcReport {
     pub train_steps: usize,
     pub val_steps: usize,
     /// Mean over samples of the summed squared error, without the L2 term.
+    #[serde(with = "crate::stats::nan_as_null")]
     pub train_loss: f64,
+    /// NaN (stored as null) without validation steps.
+    #[serde(with = "crate::stats::nan_as_null")]
     pub val_loss: f64,
 }
 
@@ -78,6 +91,7 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCr
     let (xt, yt) = (gather(train, &x, od), gather(train, &y, ad));
     let mut config = PolicyConfig::bc(od, ad);
     config.hidden = cfg.hidden.clone();
+    config.init = cfg.init;
     let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
     let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
     let nt = train.len();

@@ -13,7 +13,7 @@ use tch::{Kind, Tensor, nn::OptimizerConfig};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::{RewardConfig, RewardEnsemble};
+use crate::nn::{RewardConfig, RewardEnsemble, WeightInit};
 use crate::seed::{self, Purpose};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -35,6 +35,8 @@ pub struct TrexConfig {
     pub val_fraction: f64,
     /// Feed the action to the reward net too.
     pub action_input: bool,
+    /// Initialisation of the reward networks.
+    pub init: WeightInit,
 }
 
 impl Default for TrexConfig {
@@ -52,6 +54,7 @@ impl Default for TrexConfig {
             l2: 0.01,
             val_fraction: 0.2,
             action_input: false,
+            init: WeightInit::TorchDefault,
         }
     }
 }
@@ -192,13 +195,7 @@ fn accuracy(model: &RewardEnsemble, m: usize, trajs: &[Trajectory], pairs: &[Pai
 }
 
 /// Trains an ensemble on ranked trajectories; returns it with one report per model.
-pub fn train(
-    trajs: &[Trajectory],
-    ranking: &Ranking,
-    cfg: &TrexConfig,
-    ctrl_coeff: f64,
-    seed: u64,
-) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
+pub fn train(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, seed: u64) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
     if trajs.is_empty() || trajs.len() != ranking.scores.len() {
         return Err(Error::Invalid("T-REX needs one score per trajectory and at least two trajectories".into()));
     }
@@ -209,7 +206,7 @@ pub fn train(
         hidden: cfg.hidden.clone(),
         models: cfg.models,
         clip: 100.0,
-        ctrl_coeff,
+        init: cfg.init,
     };
     let model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
     let mut reports = Vec::new();
@@ -298,7 +295,7 @@ mod tests {
             l2: 0.0,
             ..Default::default()
         };
-        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 0.0, 1).unwrap();
+        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 1).unwrap();
         assert!(reports.iter().all(|r| r.val_accuracy > 0.85), "{reports:?}");
         let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();

@@ -34,6 +34,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         crate::report::write_csv(&mut t.returns, &args.out.join("returns.csv"))?;
         crate::report::write_csv(&mut t.demos, &args.out.join("demos.csv"))?;
         crate::report::write_csv(&mut t.accuracy, &args.out.join("reward_accuracy.csv"))?;
+        crate::report::write_csv(&mut crate::report::protocols_frame(&t.protocols)?, &args.out.join("protocols.csv"))?;
     }
     let md = crate::report::markdown(&t);
     if args.format != ReportFormat::Csv {

@@ -64,6 +64,7 @@ pub fn run(cmd: &TrainCommand) -> anyhow::Result<()> {
         num_envs: args.num_envs,
         threads: args.threads,
         eval_every: args.eval_every,
+        checkpoint_every: args.checkpoint_every,
         ..Default::default()
     };
     let batch = cfg.num_envs * cfg.num_steps;
@@ -97,8 +98,7 @@ pub fn run(cmd: &TrainCommand) -> anyhow::Result<()> {
     };
     let hyper = serde_json::to_value(&cfg)?;
     let mut save = |p: &crate::nn::ActorCritic, step: usize| p.save(&ppo::checkpoint_dir(&args.out, step), hyper.clone());
-    let checkpoints = ppo::Checkpoints { every: args.checkpoint_every, save: &mut save };
-    let res = ppo::train(id, &cfg, ppo::RewardSource::GroundTruth, args.seed, &mut on_update, Some(checkpoints))?;
+    let res = ppo::train(id, &cfg, ppo::RewardSource::GroundTruth, args.seed, &mut on_update, Some(&mut save))?;
     bar.finish_and_clear();
     res.policy.save(&args.out, serde_json::to_value(&cfg)?)?;
     ppo::write_curve(&args.out.join("curve.csv"), &res.curve)?;

@@ -28,6 +28,29 @@ pub enum Init {
     /// Orthogonal weights with gain sqrt(2) on hidden layers and `out_gain` on the output
     /// layer, zero biases (the PPO implementation details of CleanRL and SB3).
     Orthogonal { out_gain: f64 },
+    /// N(0, std^2) weights, zero biases (the original D-REX code's reward and BC networks).
+    Normal { std: f64 },
+}
+
+/// The initialisation a pipeline file can choose for the BC and reward networks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum WeightInit {
+    /// libtorch's default (Kaiming-uniform weights, uniform biases).
+    #[default]
+    #[serde(rename = "default")]
+    TorchDefault,
+    /// N(0, 0.02^2) weights and zero biases, as the original D-REX code.
+    #[serde(rename = "normal-0.02")]
+    Normal002,
+}
+
+impl WeightInit {
+    pub fn init(self) -> Init {
+        match self {
+            WeightInit::TorchDefault => Init::Default,
+            WeightInit::Normal002 => Init::Normal { std: 0.02 },
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -46,6 +69,11 @@ impl Mlp {
                     Init::Default => nn::LinearConfig::default(),
                     Init::Orthogonal { out_gain } => nn::LinearConfig {
                         ws_init: nn::Init::Orthogonal { gain: if i + 1 == n { out_gain } else { 2f64.sqrt() } },
+                        bs_init: Some(nn::Init::Const(0.0)),
+                        bias: true,
+                    },
+                    Init::Normal { std } => nn::LinearConfig {
+                        ws_init: nn::Init::Randn { mean: 0.0, stdev: std },
                         bs_init: Some(nn::Init::Const(0.0)),
                         bias: true,
                     },

@@ -8,7 +8,7 @@ pub mod reward;
 pub mod sidecar;
 
 pub use cpu::MlpCpu;
-pub use mlp::{Activation, Init, Mlp};
+pub use mlp::{Activation, Init, Mlp, WeightInit};
 pub use policy::{ActorCritic, PolicyConfig};
 pub use reward::{RewardConfig, RewardEnsemble, RewardNet};
 

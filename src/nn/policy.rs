@@ -9,7 +9,7 @@ use rand_distr::StandardNormal;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use super::sidecar::{load_weights, read_json, save_weights, write_json};
-use super::{Activation, Init, Mlp, MlpCpu};
+use super::{Activation, Init, Mlp, MlpCpu, WeightInit};
 use crate::data::normalize::RunningMeanStd;
 use crate::error::{Error, Result};
 
@@ -27,6 +27,9 @@ pub struct PolicyConfig {
     pub critic: bool,
     /// Orthogonal initialisation (gains sqrt 2, 0.01 actor output, 1 critic output).
     pub orthogonal_init: bool,
+    /// The initialisation otherwise.
+    #[serde(default)]
+    pub init: WeightInit,
     pub log_std_init: f64,
 }
 
@@ -40,6 +43,7 @@ impl PolicyConfig {
             activation: Activation::Tanh,
             critic: true,
             orthogonal_init: true,
+            init: WeightInit::TorchDefault,
             log_std_init: 0.0,
         }
     }
@@ -52,6 +56,7 @@ impl PolicyConfig {
             activation: Activation::Relu,
             critic: false,
             orthogonal_init: false,
+            init: WeightInit::TorchDefault,
             log_std_init: 0.0,
         }
     }
@@ -88,7 +93,7 @@ impl ActorCritic {
     pub fn new(config: PolicyConfig) -> Self {
         let vs = nn::VarStore::new(Device::Cpu);
         let root = vs.root();
-        let init = |g| if config.orthogonal_init { Init::Orthogonal { out_gain: g } } else { Init::Default };
+        let init = |g| if config.orthogonal_init { Init::Orthogonal { out_gain: g } } else { config.init.init() };
         let actor = Mlp::new(&(&root / "actor"), &config.sizes(config.act_dim), config.activation, init(0.01));
         let critic = config.critic.then(|| Mlp::new(&(&root / "critic"), &config.sizes(1), config.activation, init(1.0)));
         let log_std = root.var("log_std", &[config.act_dim as i64], nn::Init::Const(config.log_std_init));

@@ -1,14 +1,17 @@
 //! The T-REX reward network r(s) (optionally r(s, a)) and ensembles of them.
 //!
-//! For RL each model's output is normalised by that model's own running mean and std,
-//! clipped to +-clip and averaged over the ensemble (the original D-REX code used only the
-//! last model, a bug we do not copy); the control cost `ctrl_coeff * ||a||^2` is subtracted.
+//! For RL ([`RewardEnsemble::rl_reward`]) each model's output is normalised by that model's
+//! own running mean and std and clipped to +-clip; the models combine as [`Combine`] says
+//! (by default their mean; the original D-REX code used the last model's output divided by
+//! the number of models, a bug kept there as "original code"), and the control cost
+//! `ctrl_coeff * ||a||^2` is subtracted, on the clipped action by default or on the raw
+//! sampled action as the original did ([`CtrlAction`]).
 use std::path::Path;
 
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use super::sidecar::{load_weights, read_json, save_weights, write_json};
-use super::{Activation, Init, Mlp};
+use super::{Activation, Mlp, WeightInit};
 use crate::data::normalize::RunningMeanStd;
 use crate::error::{Error, Result};
 
@@ -27,17 +30,49 @@ pub struct RewardConfig {
     pub models: usize,
     /// Clip of each model's normalised output.
     pub clip: f64,
-    pub ctrl_coeff: f64,
+    #[serde(default)]
+    pub init: WeightInit,
 }
 
 impl RewardConfig {
     /// D-REX's MuJoCo reward: 2 x 256 ReLU on the observation, 3 models.
-    pub fn drex(obs_dim: usize, ctrl_coeff: f64) -> Self {
-        RewardConfig { obs_dim, act_dim: None, hidden: vec![256, 256], models: 3, clip: 100.0, ctrl_coeff }
+    pub fn drex(obs_dim: usize) -> Self {
+        RewardConfig { obs_dim, act_dim: None, hidden: vec![256, 256], models: 3, clip: 100.0, init: WeightInit::TorchDefault }
     }
     pub fn input_dim(&self) -> usize {
         self.obs_dim + self.act_dim.unwrap_or(0)
     }
+}
+
+/// How the ensemble's normalised outputs combine into one reward.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Combine {
+    /// The mean of the models' normalised outputs.
+    #[default]
+    Mean,
+    /// The last model's normalised output divided by the number of models (the original code).
+    LastOverCount,
+}
+
+/// Which action the control cost is charged on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CtrlAction {
+    /// The action sent to the environment, clipped to the box.
+    #[default]
+    Clipped,
+    /// The raw sampled action (the original code): saturating the actuators still costs.
+    Raw,
+}
+
+/// The reward PPO optimises, composed from a learned ensemble.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Composition {
+    pub ctrl_coeff: f64,
+    pub combine: Combine,
+    pub ctrl_action: CtrlAction,
 }
 
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -65,7 +100,7 @@ impl RewardEnsemble {
         let nets = stores
             .iter()
             .enumerate()
-            .map(|(m, vs)| Mlp::new(&(vs.root() / format!("m{m}")), &sizes, Activation::Relu, Init::Default))
+            .map(|(m, vs)| Mlp::new(&(vs.root() / format!("m{m}")), &sizes, Activation::Relu, config.init.init()))
             .collect();
         let norms = (0..config.models).map(|_| RunningMeanStd::new(1)).collect();
         RewardEnsemble { stores, nets, config, norms }
@@ -100,9 +135,19 @@ impl RewardEnsemble {
         raw.iter().map(|r| r.iter().map(|&x| x as f64).sum::<f64>()).sum::<f64>() / raw.len() as f64
     }
 
-    /// The reward RL optimises, for a batch of steps (`obs` are the next observations s').
-    /// With `update`, each model's running statistics first absorb this batch.
-    pub fn rl_reward(&mut self, next_obs: &[f32], actions: &[f32], act_dim: usize, update: bool) -> Vec<f64> {
+    /// The reward RL optimises, for a batch of steps: `next_obs` are the next observations
+    /// s', `actions` what the network reads (the clipped actions), `cost_actions` what the
+    /// control cost is charged on. With `update`, each model's running statistics first
+    /// absorb this batch.
+    pub fn rl_reward(
+        &mut self,
+        next_obs: &[f32],
+        actions: &[f32],
+        cost_actions: &[f32],
+        act_dim: usize,
+        comp: &Composition,
+        update: bool,
+    ) -> Vec<f64> {
         let raw = self.raw(next_obs, actions);
         if update {
             for (norm, r) in self.norms.iter_mut().zip(&raw) {
@@ -110,17 +155,23 @@ impl RewardEnsemble {
             }
         }
         let n = raw[0].len();
+        let k = self.norms.len();
+        let used: Vec<usize> = match comp.combine {
+            Combine::Mean => (0..k).collect(),
+            Combine::LastOverCount => vec![k - 1],
+        };
         let mut out = vec![0.0; n];
-        for (norm, r) in self.norms.iter().zip(&raw) {
-            let (mean, std) = (norm.mean[0], (norm.var[0] + 1e-8).sqrt());
-            for (o, &x) in out.iter_mut().zip(r) {
+        for &m in &used {
+            let (mean, std) = (self.norms[m].mean[0], (self.norms[m].var[0] + 1e-8).sqrt());
+            for (o, &x) in out.iter_mut().zip(&raw[m]) {
                 *o += ((x as f64 - mean) / std).clamp(-self.config.clip, self.config.clip);
             }
         }
-        let k = self.norms.len() as f64;
         for (i, o) in out.iter_mut().enumerate() {
-            let a = &actions[i * act_dim..(i + 1) * act_dim];
-            *o = *o / k - self.config.ctrl_coeff * a.iter().map(|&x| (x as f64).powi(2)).sum::<f64>();
+            let a = &cost_actions[i * act_dim..(i + 1) * act_dim];
+            // Both combinations divide by the number of models: the mean, or the original's
+            // last model over the count.
+            *o = *o / k as f64 - comp.ctrl_coeff * a.iter().map(|&x| (x as f64).powi(2)).sum::<f64>();
         }
         out
     }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use crate::algo::noise::NoiseProcess;
 use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
+use crate::nn::reward::{Combine, Composition, CtrlAction};
 
 pub const SCHEMA_VERSION: u32 = 1;
 
@@ -93,12 +94,17 @@ impl Default for EvalConfig {
     }
 }
 
+/// How PPO's reward is composed from the learned ensemble ([`Composition`]).
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RewardSettings {
     /// Control-cost coefficient subtracted from the learned reward (default per environment:
     /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d).
     pub ctrl_coeff: Option<f64>,
+    /// mean, or last-over-count (the original code).
+    pub combine: Combine,
+    /// clipped, or raw (the original code).
+    pub ctrl_action: CtrlAction,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -213,7 +219,8 @@ pub struct Pipeline {
     pub env: EnvId,
     pub store: PathBuf,
     pub spec: PipelineFile,
-    pub ctrl_coeff: f64,
+    /// The reward PPO optimises on a learned ensemble.
+    pub composition: Composition,
 }
 
 /// Where a key path is in the YAML text: the line and column of its last key, found by
@@ -355,7 +362,8 @@ impl Pipeline {
                 ));
             }
         }
-        Ok(Pipeline { file: path.into(), name, env, store, spec, ctrl_coeff })
+        let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
+        Ok(Pipeline { file: path.into(), name, env, store, spec, composition })
     }
 
     /// The pipeline file's directory, against which relative paths resolve.
@@ -416,7 +424,7 @@ mod tests {
         assert_eq!(p.spec.seeds, vec![0, 1, 2]);
         assert_eq!(p.spec.bc.iterations, 50_000);
         assert_eq!(p.spec.trex.window, 50);
-        assert_eq!(p.ctrl_coeff, 1e-3);
+        assert_eq!(p.composition.ctrl_coeff, 1e-3);
     }
 
     #[test]

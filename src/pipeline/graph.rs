@@ -78,7 +78,7 @@ pub(super) fn io(role: &str, src: &str) -> (String, String) {
 
 /// A T-REX node's parameters for `m` on the given ranked sets.
 pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, cross_level: bool) -> Params {
-    Params::Trex(trex::TrexParams { env: p.env, trex: p.trex_for(m), ctrl_coeff: p.ctrl_coeff, sets, cross_level })
+    Params::Trex(trex::TrexParams { env: p.env, trex: p.trex_for(m), sets, cross_level })
 }
 
 fn eval_params(p: &Pipeline, method: Method, iteration: usize, run: usize) -> Params {
@@ -94,7 +94,7 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .map(|(r, &seed)| {
             let run = g.push(
                 format!("{prefix}/ppo/{r}"),
-                Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m) }),
+                Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m), reward: p.composition }),
                 seed,
                 vec![io("reward", reward)],
             );

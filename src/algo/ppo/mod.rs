@@ -26,6 +26,7 @@ use crate::data::{RunningMeanStd, TrajMeta};
 use crate::env::{Env, EnvId, VecEnv};
 use crate::error::{Error, Result};
 use crate::nn::policy::CpuPolicy;
+use crate::nn::reward::{Composition, CtrlAction};
 use crate::nn::{ActorCritic, PolicyConfig, RewardEnsemble};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -63,6 +64,12 @@ pub struct PpoConfig {
     /// Where the minibatch updates run: `fused` (plain Rust, see ppo_fused.rs) or `tch`
     /// (libtorch autograd). Both compute the same loss; fused is several times faster.
     pub backend: Backend,
+    /// Keep a checkpoint of the policy after the first update and every this many updates
+    /// (0: none), as the original D-REX code (baselines' ppo2) did before evaluating each.
+    pub checkpoint_every: usize,
+    /// Bootstrap episodes cut by the time limit with gamma V(s_final) (SB3); false treats the
+    /// limit as termination (CleanRL, and the original code's baselines PPO2).
+    pub bootstrap_truncation: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -98,6 +105,8 @@ impl Default for PpoConfig {
             eval_every: 0,
             eval_episodes: 5,
             backend: Backend::Fused,
+            checkpoint_every: 20,
+            bootstrap_truncation: true,
         }
     }
 }
@@ -105,7 +114,7 @@ impl Default for PpoConfig {
 /// What PPO maximises.
 pub enum RewardSource {
     GroundTruth,
-    Learned(RewardEnsemble),
+    Learned { model: RewardEnsemble, composition: Composition },
 }
 
 /// Reported after every update.
@@ -135,11 +144,8 @@ pub struct PpoResult {
     pub wall_s: f64,
 }
 
-/// Receives the policy and the global step every `every` updates.
-pub struct Checkpoints<'a> {
-    pub every: usize,
-    pub save: &'a mut dyn FnMut(&ActorCritic, usize) -> Result<()>,
-}
+/// Receives the policy and the global step every `checkpoint_every` updates.
+pub type SaveCheckpoint<'a> = &'a mut dyn FnMut(&ActorCritic, usize) -> Result<()>;
 
 /// The running normalisers of observations and of discounted returns (reward scaling).
 struct Normalisers {
@@ -158,15 +164,15 @@ impl Normalisers {
 }
 
 /// Trains a policy with PPO. `on_update` sees every update's statistics and returns false to
-/// stop early (the demonstrator stops at a target return); `checkpoints`, when given,
-/// receive the policy every so many updates.
+/// stop early (the demonstrator stops at a target return); `checkpoint`, when given,
+/// receives the policy after the first update and every `cfg.checkpoint_every` updates.
 pub fn train(
     id: EnvId,
     cfg: &PpoConfig,
     mut reward: RewardSource,
     seed: u64,
     on_update: &mut dyn FnMut(&PpoProgress) -> bool,
-    mut checkpoints: Option<Checkpoints>,
+    mut checkpoint: Option<SaveCheckpoint>,
 ) -> Result<PpoResult> {
     let started = Instant::now();
     tch::set_num_threads(cfg.threads.max(1) as i32);
@@ -203,7 +209,13 @@ pub fn train(
         // Rewards: the environment's or the learned one, then return-based scaling.
         let mut rewards: Vec<f64> = match &mut reward {
             RewardSource::GroundTruth => buf.env_rewards.clone(),
-            RewardSource::Learned(model) => model.rl_reward(&buf.raw_next, &buf.clipped_actions, ad, true),
+            RewardSource::Learned { model, composition } => {
+                let cost_actions = match composition.ctrl_action {
+                    CtrlAction::Clipped => &buf.clipped_actions,
+                    CtrlAction::Raw => &buf.actions,
+                };
+                model.rl_reward(&buf.raw_next, &buf.clipped_actions, cost_actions, ad, composition, true)
+            }
         };
         let mut ended_learned = Vec::new();
         for k in 0..batch {
@@ -218,7 +230,9 @@ pub fn train(
                 episode_learned[i] = 0.0;
             }
         }
-        buf.bootstrap_truncations(&mut rewards, cfg.gamma, |f| policy.value(f, &mut scratch));
+        if cfg.bootstrap_truncation {
+            buf.bootstrap_truncations(&mut rewards, cfg.gamma, |f| policy.value(f, &mut scratch));
+        }
         let next_values: Vec<f32> = (0..n).map(|i| policy.value(&norm.obs(&obs[i * od..(i + 1) * od]), &mut scratch)).collect();
         let (advantages, returns) = buf.advantages(&rewards, &next_values, cfg.gamma, cfg.gae_lambda);
 
@@ -249,7 +263,7 @@ pub fn train(
             update,
             updates,
             episodic_return: crate::stats::mean(&ended_true),
-            learned_return: matches!(reward, RewardSource::Learned(_)).then(|| crate::stats::mean(&ended_learned)).flatten(),
+            learned_return: matches!(reward, RewardSource::Learned { .. }).then(|| crate::stats::mean(&ended_learned)).flatten(),
             policy_loss: stats.policy_loss,
             value_loss: stats.value_loss,
             entropy: stats.entropy,
@@ -261,11 +275,11 @@ pub fn train(
         };
         let go_on = on_update(&progress);
         curve.push(progress);
-        if let Some(c) = &mut checkpoints
-            && c.every > 0
-            && update % c.every == 0
+        if let Some(save) = &mut checkpoint
+            && cfg.checkpoint_every > 0
+            && (update == 1 || update % cfg.checkpoint_every == 0)
         {
-            (c.save)(&agent, global_step)?;
+            save(&agent, global_step)?;
         }
         if !go_on {
             break;
@@ -345,9 +359,30 @@ pub fn evaluate(policy: &ActorCritic, id: EnvId, episodes: usize, seed: u64) -> 
     Ok(ReturnStats::of(&returns))
 }
 
-/// Where `idrex train ppo` writes its checkpoints.
+/// Where the checkpoint at global step `step` of a run writing into `out` goes.
 pub fn checkpoint_dir(out: &Path, step: usize) -> PathBuf {
     out.join("checkpoints").join(format!("step-{step:08}"))
+}
+
+/// The checkpoints under `out`, as (global step, directory), in step order; none when the
+/// run kept none.
+pub fn checkpoints(out: &Path) -> Result<Vec<(usize, PathBuf)>> {
+    let dir = out.join("checkpoints");
+    if !dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let mut found = Vec::new();
+    for e in std::fs::read_dir(&dir).map_err(|e| Error::io(&dir, e))? {
+        let e = e.map_err(|e| Error::io(&dir, e))?;
+        let name = e.file_name().to_string_lossy().into_owned();
+        let step = name.strip_prefix("step-").and_then(|s| s.parse::<usize>().ok());
+        match step {
+            Some(step) => found.push((step, e.path())),
+            None => return Err(Error::file(e.path(), "not a checkpoint directory (step-<global step>)")),
+        }
+    }
+    found.sort();
+    Ok(found)
 }
 
 /// The learning curve as CSV, one row per update: the one writer for every PPO curve.

@@ -1,11 +1,15 @@
 //! `eval`: the ground-truth return of a policy over `episodes` episodes (PPO policies sample,
-//! BC acts with its mean); with a reward model as input, also what the learned reward says
-//! of the same episodes and how well it ranks them.
-use super::{RolloutSummary, StageCtx, load_policy_for};
+//! as the original D-REX evaluation did; BC acts with its mean), and of every checkpoint the
+//! PPO run kept, each on the same episode seeds. With a reward model as input, also what the
+//! learned reward says of each checkpoint's episodes: the ensemble's mean predicted return,
+//! its most pessimistic member and the members' disagreement (the ground-truth-free
+//! checkpoint choice reads these), and for the final policy how well it ranks the episodes.
+use super::{REWARD, RolloutSummary, StageCtx, load_policy_for, read_rollouts};
+use crate::algo::ppo;
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::nn::RewardEnsemble;
+use crate::nn::{ActorCritic, RewardEnsemble};
 use crate::pipeline::config::Method;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
@@ -23,7 +27,7 @@ pub struct EvalParams {
     pub run: usize,
 }
 
-/// How the learned reward scores the evaluation episodes.
+/// How the learned reward scores the final policy's evaluation episodes.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RewardAccuracy {
     pub predicted_returns: Vec<f64>,
@@ -35,23 +39,122 @@ pub struct RewardAccuracy {
     pub pairwise_accuracy: f64,
 }
 
+/// What the learned ensemble says of one checkpoint's episodes (means over the episodes).
+/// Each member's return is measured in its own units relative to the demonstrations:
+/// `z_m = sum_t (r_m(s_t) - mu_m) / sigma_m`, with mu_m and sigma_m the member's per-step
+/// mean and std over the demonstrations' steps, so that members (whose scale and offset
+/// T-REX leaves free) can be compared.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LearnedScore {
+    /// The ensemble mean of each member's summed raw reward.
+    pub mean: f64,
+    /// min over members of z_m: the most pessimistic member's view.
+    pub pessimistic: f64,
+    /// std over members of z_m: the members' disagreement.
+    pub spread: f64,
+}
+
+/// One checkpoint's evaluation.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CheckpointEval {
+    /// PPO's global step when the checkpoint was taken.
+    pub step: usize,
+    /// Ground-truth return of each episode.
+    pub returns: Vec<f64>,
+    pub learned: Option<LearnedScore>,
+}
+
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EvalMetrics {
+    /// The final policy.
     #[serde(flatten)]
     pub summary: RolloutSummary,
     #[serde(flatten)]
     pub reward: Option<RewardAccuracy>,
+    /// Every checkpoint in step order, the final policy last; empty for policies without
+    /// checkpoints (BC).
+    #[serde(default)]
+    pub checkpoints: Vec<CheckpointEval>,
+}
+
+/// Each member's per-step mean and std over a set of trajectories.
+fn member_stats(model: &RewardEnsemble, trajs: &[Trajectory]) -> Vec<(f64, f64)> {
+    let mut sums = vec![(0.0f64, 0.0f64, 0usize); model.nets.len()];
+    for t in trajs {
+        for (s, r) in sums.iter_mut().zip(model.raw(t.next_obs(), &t.actions)) {
+            for x in r {
+                s.0 += x as f64;
+                s.1 += (x as f64).powi(2);
+                s.2 += 1;
+            }
+        }
+    }
+    sums.into_iter()
+        .map(|(sum, sq, n)| {
+            let n = n.max(1) as f64;
+            let mean = sum / n;
+            (mean, (sq / n - mean * mean).max(0.0).sqrt().max(1e-8))
+        })
+        .collect()
+}
+
+fn learned_score(model: &RewardEnsemble, reference: &[(f64, f64)], trajs: &[Trajectory]) -> LearnedScore {
+    let (mut mean, mut pessimistic, mut spread) = (0.0, 0.0, 0.0);
+    for t in trajs {
+        let raw = model.raw(t.next_obs(), &t.actions);
+        let sums: Vec<f64> = raw.iter().map(|r| r.iter().map(|&x| x as f64).sum()).collect();
+        let z: Vec<f64> = sums.iter().zip(reference).map(|(s, (mu, sigma))| (s - mu * t.len() as f64) / sigma).collect();
+        let zm = z.iter().sum::<f64>() / z.len() as f64;
+        mean += sums.iter().sum::<f64>() / sums.len() as f64;
+        pessimistic += z.iter().copied().fold(f64::INFINITY, f64::min);
+        spread += (z.iter().map(|x| (x - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt();
+    }
+    let n = trajs.len().max(1) as f64;
+    LearnedScore { mean: mean / n, pessimistic: pessimistic / n, spread: spread / n }
 }
 
 pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     let mut env = Env::new(p.env)?;
-    let policy = load_policy_for(ctx.input("policy")?, &env, p.env)?;
-    let meta = TrajMeta { source: "eval".into(), ..Default::default() };
-    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes, ctx.seed, Purpose::EvalEpisode, &meta);
-    let (reward, learned) = match ctx.inputs.get("reward") {
-        None => (None, None),
+    let policy_dir = ctx.input("policy")?;
+    let final_policy = load_policy_for(policy_dir, &env, p.env)?;
+    let reward = match ctx.inputs.get("reward") {
+        None => None,
         Some(dir) => {
-            let model = RewardEnsemble::load(&dir.join(super::REWARD))?;
+            let model = RewardEnsemble::load(&dir.join(REWARD))?;
+            let reference = member_stats(&model, &read_rollouts(ctx.input("demos")?)?);
+            Some((model, reference))
+        }
+    };
+    let meta = TrajMeta { source: "eval".into(), ..Default::default() };
+    let dims = (env.obs_dim(), env.act_dim());
+    // The same episode seeds for every checkpoint: their returns differ by the policy only.
+    let mut play = |policy: &ActorCritic| {
+        rollout::episodes(&mut env, &mut PolicyActor::acting(policy), p.episodes, ctx.seed, Purpose::EvalEpisode, &meta)
+    };
+    // The PPO stage keeps the final policy as its last checkpoint; its episodes are the
+    // final policy's.
+    let stored = ppo::checkpoints(policy_dir)?;
+    let mut checkpoints = Vec::with_capacity(stored.len());
+    let mut last_trajs = None;
+    for (i, (step, dir)) in stored.iter().enumerate() {
+        ctx.progress.set_message(format!("checkpoint {}/{} (step {step})", i + 1, stored.len()));
+        let policy = ActorCritic::load(dir)?;
+        policy.expect_dims(dims.0, dims.1, p.env.name())?;
+        let trajs = play(&policy);
+        checkpoints.push(CheckpointEval {
+            step: *step,
+            returns: trajs.iter().map(Trajectory::ret).collect(),
+            learned: reward.as_ref().map(|(m, r)| learned_score(m, r, &trajs)),
+        });
+        last_trajs = Some(trajs);
+    }
+    let trajs = match last_trajs {
+        Some(t) => t,
+        None => play(&final_policy),
+    };
+    let (accuracy, learned) = match &reward {
+        None => (None, None),
+        Some((model, _)) => {
             let per_step: Vec<Vec<f64>> = trajs
                 .iter()
                 .map(|t| {
@@ -71,5 +174,5 @@ pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
         }
     };
     ctx.write_rollouts(p.env, &trajs, learned.as_deref())?;
-    Ok(EvalMetrics { summary: RolloutSummary::of(&trajs), reward })
+    Ok(EvalMetrics { summary: RolloutSummary::of(&trajs), reward: accuracy, checkpoints })
 }

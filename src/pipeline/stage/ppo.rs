@@ -1,16 +1,21 @@
-//! `ppo`: one RL run on a learned reward ([`crate::algo::ppo`]); the final policy and its
-//! learning curve.
+//! `ppo`: one RL run on a learned reward ([`crate::algo::ppo`]); the final policy, its
+//! learning curve and a checkpoint every `ppo.checkpoint_every` updates
+//! (`checkpoints/step-<global step>/`, the final policy always among them), which the
+//! evaluation stage evaluates one by one.
 use super::{POLICY, REWARD, StageCtx, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::RewardEnsemble;
+use crate::nn::reward::Composition;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PpoParams {
     pub env: EnvId,
     pub ppo: PpoConfig,
+    /// How the learned reward is composed.
+    pub reward: Composition,
 }
 
 /// One point of the learning curve: the mean true and learned returns of the training
@@ -40,10 +45,17 @@ pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
         show(u);
         true
     };
-    let res = ppo::train(p.env, &cfg, ppo::RewardSource::Learned(reward), ctx.seed, &mut on_update, None)?;
-    res.policy.save(&ctx.out.join(POLICY), serde_json::to_value(&cfg).unwrap_or_default())?;
-    ppo::write_curve(&ctx.out.join(CURVE), &res.curve)?;
+    let hyper = serde_json::to_value(&cfg).unwrap_or_default();
+    let mut save = |policy: &crate::nn::ActorCritic, step: usize| policy.save(&ppo::checkpoint_dir(ctx.out, step), hyper.clone());
+    let source = ppo::RewardSource::Learned { model: reward, composition: p.reward };
+    let res = ppo::train(p.env, &cfg, source, ctx.seed, &mut on_update, Some(&mut save))?;
+    res.policy.save(&ctx.out.join(POLICY), hyper.clone())?;
     let steps = res.curve.last().map_or(0, |u| u.global_step);
+    let last = ppo::checkpoint_dir(ctx.out, steps);
+    if cfg.checkpoint_every > 0 && !last.exists() {
+        res.policy.save(&last, hyper)?;
+    }
+    ppo::write_curve(&ctx.out.join(CURVE), &res.curve)?;
     Ok(PpoMetrics {
         wall_s: res.wall_s,
         steps_per_s: steps as f64 / res.wall_s,

@@ -25,7 +25,6 @@ pub struct RankedSet {
 pub struct TrexParams {
     pub env: EnvId,
     pub trex: TrexConfig,
-    pub ctrl_coeff: f64,
     /// One entry per input `set<i>`, in order.
     pub sets: Vec<RankedSet>,
     pub cross_level: bool,
@@ -75,7 +74,7 @@ pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
         }
     }
     ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
-    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, p.ctrl_coeff, ctx.seed)?;
+    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed)?;
     model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
     let score = |ts: &[Trajectory]| Scored {
         predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
