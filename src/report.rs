@@ -76,15 +76,27 @@ pub struct ProtocolRow {
     pub gap_to_best: Option<f64>,
 }
 
-/// The steps every run has a checkpoint at.
-fn common_steps(runs: &[RunEval]) -> Vec<usize> {
-    let mut steps: Vec<usize> = runs.first().map(|r| r.checkpoints.iter().map(|c| c.step).collect()).unwrap_or_default();
-    steps.retain(|s| runs.iter().all(|r| r.checkpoints.iter().any(|c| c.step == *s)));
-    steps
+/// The checkpoints a method's runs chose, pooled over the runs (the steps every run has).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Selection {
+    /// The highest pooled true return: the paper's protocol.
+    pub by_ground_truth: Option<usize>,
+    /// The highest pooled pessimistic learned return, where every run has learned scores.
+    pub without_ground_truth: Option<usize>,
 }
 
-fn at(r: &RunEval, step: usize) -> &CheckpointEval {
-    r.checkpoints.iter().find(|c| c.step == step).expect("a common step")
+/// Chooses checkpoints from the runs' checkpoint evaluations (one slice per run).
+pub fn select(runs: &[&[CheckpointEval]]) -> Selection {
+    let mut steps: Vec<usize> = runs.first().map(|r| r.iter().map(|c| c.step).collect()).unwrap_or_default();
+    steps.retain(|s| runs.iter().all(|r| r.iter().any(|c| c.step == *s)));
+    let at = |r: &[CheckpointEval], s: usize| r.iter().find(|c| c.step == s).cloned().expect("a common step");
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    Selection {
+        by_ground_truth: argmax(&steps, |s| Some(mean(&runs.iter().flat_map(|r| at(r, s).returns).collect::<Vec<_>>()))),
+        without_ground_truth: argmax(&steps, |s| {
+            runs.iter().map(|r| at(r, s).learned.map(|l| l.pessimistic)).collect::<Option<Vec<_>>>().map(|v| mean(&v))
+        }),
+    }
 }
 
 /// The step maximising `score` (the earliest on ties), if any.
@@ -116,12 +128,12 @@ fn protocol_rows(env: &str, pipeline: &str, method: &str, runs: &[RunEval]) -> V
             gap_to_best: None,
         }
     };
-    let at_step = |step: usize| runs.iter().map(|r| at(r, step).returns.clone()).collect::<Vec<_>>();
+    let at_step = |step: usize| {
+        runs.iter().map(|r| r.checkpoints.iter().find(|c| c.step == step).expect("a chosen step").returns.clone()).collect::<Vec<_>>()
+    };
     let final_row = row(Protocol::Final, None, runs.iter().map(|r| r.final_returns.clone()).collect());
-    let steps = common_steps(runs);
-    let mean_of = |v: Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
-    let best = argmax(&steps, |s| Some(mean_of(at_step(s).concat())));
-    let free = argmax(&steps, |s| runs.iter().map(|r| at(r, s).learned.map(|l| l.pessimistic)).collect::<Option<Vec<_>>>().map(mean_of));
+    let chosen = select(&runs.iter().map(|r| r.checkpoints.as_slice()).collect::<Vec<_>>());
+    let (best, free) = (chosen.by_ground_truth, chosen.without_ground_truth);
     let mut out = vec![final_row.clone()];
     let best_row = match best {
         Some(s) => row(Protocol::BestByGroundTruth, Some(s), at_step(s)),

@@ -95,6 +95,70 @@ print("ok")
 "#;
     assert_eq!(py(csv_check, &[out_dir.join("returns.csv").to_str().unwrap()]).trim(), "ok");
 
+    // Every PPO run kept its checkpoints (smoke: 4 updates, one checkpoint each) and its
+    // evaluation evaluated every one of them, the final policy last.
+    let checkpoints_check = r#"
+import json, os, sys
+store = sys.argv[1]
+manifests = [json.load(open(os.path.join(store, d, "manifest.json"))) for d in os.listdir(store) if not d.startswith(".")]
+ppo = {m["key"]: m for m in manifests if m["kind"] == "ppo"}
+evals = [m for m in manifests if m["kind"] == "eval" and m["inputs"]["policy"] in ppo]
+assert len(ppo) == 8 and len(evals) == 8, (len(ppo), len(evals))
+for e in evals:
+    key = e["inputs"]["policy"]
+    stored = sorted(int(d.split("-")[1]) for d in os.listdir(os.path.join(store, key, "checkpoints")))
+    assert stored == [1024, 2048, 3072, 4096], stored
+    cps = e["metrics"]["checkpoints"]
+    assert [c["step"] for c in cps] == stored, cps
+    assert all(len(c["returns"]) == e["params"]["episodes"] and c["learned"] is not None for c in cps)
+    assert cps[-1]["returns"] == e["metrics"]["returns"], "the last checkpoint is the final policy"
+print("ok")
+"#;
+    assert_eq!(py(checkpoints_check, &[store.to_str().unwrap()]).trim(), "ok");
+
+    // The three protocols: the report's figures are what a hand computation over the eval
+    // manifests gives.
+    let protocols_check = r#"
+import csv, json, os, sys
+from collections import defaultdict
+store, table = sys.argv[1], sys.argv[2]
+groups = defaultdict(list)
+for d in os.listdir(store):
+    if d.startswith("."):
+        continue
+    m = json.load(open(os.path.join(store, d, "manifest.json")))
+    if m["kind"] == "eval":
+        p = m["params"]
+        groups[(p["env"], p["pipeline"], p["method"])].append(m["metrics"])
+mean = lambda v: sum(v) / len(v)
+rows = {(r["env"], r["pipeline"], r["method"], r["protocol"]): r for r in csv.DictReader(open(table))}
+checked = 0
+for (env, pipe, method), runs in groups.items():
+    want = {"final": (None, mean([x for r in runs for x in r["returns"]]))}
+    if runs[0]["checkpoints"]:
+        steps = [c["step"] for c in runs[0]["checkpoints"]]
+        at = lambda r, s: next(c for c in r["checkpoints"] if c["step"] == s)
+        pooled = {s: mean([x for r in runs for x in at(r, s)["returns"]]) for s in steps}
+        best = max(steps, key=lambda s: (pooled[s], -s))
+        free = max(steps, key=lambda s: (mean([at(r, s)["learned"]["pessimistic"] for r in runs]), -s))
+        want["best-by-ground-truth"] = (best, pooled[best])
+        want["ground-truth-free"] = (free, pooled[free])
+        gap = pooled[best] - pooled[free]
+        assert abs(float(rows[(env, pipe, method, "ground-truth-free")]["gap_to_best"]) - gap) < 1e-9
+    for protocol, (step, value) in want.items():
+        row = rows[(env, pipe, method, protocol)]
+        assert abs(float(row["mean"]) - value) < 1e-9, (method, protocol, row["mean"], value)
+        assert (row["step"] or None) == (None if step is None else str(step)), (method, protocol, row["step"], step)
+        assert float(row["ci_low"]) <= float(row["ci_high"])
+        checked += 1
+assert checked == 13, checked
+print("ok")
+"#;
+    let table = out_dir.join("protocols.csv");
+    let args = [store.to_str().unwrap(), table.to_str().unwrap()];
+    assert_eq!(py(protocols_check, &args).trim(), "ok");
+    assert!(md.contains("SELECTED WITH THE GROUND-TRUTH REWARD"), "{md}");
+
     // A flipped byte: verify reports it, a run recomputes exactly that artifact.
     let victim = mcaps[0].clone();
     let mut bytes = std::fs::read(&victim).unwrap();

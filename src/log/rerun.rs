@@ -25,6 +25,15 @@ impl Recording {
         let _ = self.rec.log(entity, &rerun::Scalars::single(value));
     }
 
+    /// A marked point on a time series plot: `value` at `x` on `timeline`, drawn as a
+    /// labelled marker (a chosen checkpoint on a learning curve).
+    pub fn marker(&self, entity: &str, timeline: &'static str, x: i64, value: f64, label: &str) {
+        let style =
+            rerun::SeriesPoints::new().with_names([label]).with_markers([rerun::components::MarkerShape::Diamond]).with_marker_sizes([8.0]);
+        let _ = self.rec.log_static(entity, &style);
+        self.scalar(entity, timeline, x, value);
+    }
+
     /// A scatter plot (static: it has no time axis).
     pub fn points(&self, entity: &str, xy: &[(f32, f32)], radius: f32) {
         let pts = rerun::Points2D::new(xy.iter().copied()).with_radii([radius]);

@@ -197,3 +197,38 @@ impl RewardEnsemble {
         Ok(r)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn composition_on_a_fixed_batch() {
+        let config = RewardConfig { obs_dim: 2, act_dim: None, hidden: vec![4], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let mut model = crate::nn::seeded(0, || RewardEnsemble::new(config));
+        // Model m normalises with mean m and std 2.
+        for (m, norm) in model.norms.iter_mut().enumerate() {
+            norm.mean[0] = m as f64;
+            norm.var[0] = 4.0;
+        }
+        let obs = [0.5f32, -1.0, 2.0, 0.25];
+        let clipped = [1.0f32, -1.0];
+        let raw_action = [3.0f32, -0.5];
+        let raw = model.raw(&obs, &clipped);
+        let norm = |m: usize, i: usize| (raw[m][i] as f64 - m as f64) / (4.0f64 + 1e-8).sqrt();
+        let comp = Composition { ctrl_coeff: 0.1, combine: Combine::Mean, ctrl_action: CtrlAction::Clipped };
+        let mean = model.rl_reward(&obs, &clipped, &clipped, 1, &comp, false);
+        for i in 0..2 {
+            let want = (norm(0, i) + norm(1, i)) / 2.0 - 0.1 * (clipped[i] as f64).powi(2);
+            assert!((mean[i] - want).abs() < 1e-9, "mean {i}: {} vs {want}", mean[i]);
+        }
+        // The original code: the last model over the count, the cost on the raw action.
+        let original = Composition { ctrl_coeff: 0.1, combine: Combine::LastOverCount, ctrl_action: CtrlAction::Raw };
+        let last = model.rl_reward(&obs, &clipped, &raw_action, 1, &original, false);
+        for i in 0..2 {
+            let want = norm(1, i) / 2.0 - 0.1 * (raw_action[i] as f64).powi(2);
+            assert!((last[i] - want).abs() < 1e-9, "last-over-count {i}: {} vs {want}", last[i]);
+        }
+        assert!((last[0] - mean[0]).abs() > 1e-6, "the options change the reward");
+    }
+}

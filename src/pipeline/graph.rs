@@ -230,3 +230,42 @@ pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) 
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = "version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nnoise:\n  schedule: [0.0, 0.5, 1.0]\n";
+
+    /// The nodes whose keys differ when `extra` is added to the base file.
+    fn changed(extra: &str) -> Vec<String> {
+        let p = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
+        let (a, b) = (expand(&p(BASE)).unwrap().keys(), expand(&p(&format!("{BASE}{extra}"))).unwrap().keys());
+        a.keys().filter(|n| a[*n] != b[*n]).cloned().collect()
+    }
+
+    #[test]
+    fn each_original_choice_changes_exactly_its_stages() {
+        let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
+        let descendants = |of: &[StageKind]| -> Vec<String> {
+            let mut out: Vec<String> = g.nodes.iter().filter(|n| of.contains(&n.kind())).flat_map(|n| g.descendants(&n.name)).collect();
+            out.sort();
+            out.dedup();
+            out
+        };
+        // The reward's composition: the PPO runs (on learned rewards) and what follows them,
+        // never the reward models themselves or anything before.
+        for extra in ["reward:\n  combine: last-over-count\n", "reward:\n  ctrl_action: raw\n", "reward:\n  ctrl_coeff: 0.5\n"] {
+            assert_eq!(changed(extra), descendants(&[StageKind::Ppo]), "{extra}");
+        }
+        // The truncation bootstrap and the checkpoint interval: every PPO run, the
+        // demonstrator's included.
+        for extra in ["ppo:\n  bootstrap_truncation: false\n", "ppo:\n  checkpoint_every: 5\n"] {
+            assert_eq!(changed(extra), descendants(&[StageKind::Demonstrator, StageKind::Ppo]), "{extra}");
+        }
+        // Initialisation: the reward networks (T-REX and everything after), and BC (with
+        // multi-BC's clones) and everything after.
+        assert_eq!(changed("trex:\n  init: normal-0.02\n"), descendants(&[StageKind::Trex]));
+        assert_eq!(changed("bc:\n  init: normal-0.02\n"), descendants(&[StageKind::Bc, StageKind::MultiBcRollouts]));
+    }
+}

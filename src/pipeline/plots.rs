@@ -8,6 +8,7 @@ use std::path::Path;
 
 use super::graph::Graph;
 use super::runner::{Outcome, Status};
+use super::stage::eval::EvalMetrics;
 use super::stage::{DegradationLevel, Metrics};
 use crate::error::Result;
 use crate::log::rerun::Recording;
@@ -27,6 +28,43 @@ fn status_name(s: &Status) -> &'static str {
         Status::Computed { .. } => "computed",
         Status::Failed { .. } => "failed",
         Status::Skipped { .. } => "skipped",
+    }
+}
+
+/// Per PPO run, the true and learned (ensemble mean) returns of every checkpoint against its
+/// step, with the checkpoints the report's protocols choose (pooled over the method's runs)
+/// marked on each run's true-return curve.
+fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Option<Metrics>) {
+    // Evaluation nodes `<method prefix>/eval/<run>`, grouped by prefix.
+    let mut groups: BTreeMap<&str, Vec<(&str, EvalMetrics)>> = BTreeMap::new();
+    for n in &g.nodes {
+        if let (Some((prefix, run)), Some(Metrics::Eval(x))) = (n.name.rsplit_once("/eval/"), metrics(&n.name))
+            && !x.checkpoints.is_empty()
+        {
+            groups.entry(prefix).or_default().push((run, x));
+        }
+    }
+    for (prefix, runs) in groups {
+        let chosen = crate::report::select(&runs.iter().map(|(_, x)| x.checkpoints.as_slice()).collect::<Vec<_>>());
+        for (run, x) in &runs {
+            let e = format!("checkpoints/{}/run{run}", entity(prefix));
+            for c in &x.checkpoints {
+                let mean = c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64;
+                rec.scalar(&format!("{e}/true_return"), "env_step", c.step as i64, mean);
+                if let Some(l) = c.learned {
+                    rec.scalar(&format!("{e}/learned_return"), "env_step", c.step as i64, l.mean);
+                }
+                let marks = [
+                    (chosen.by_ground_truth, "selected_by_ground_truth", "best checkpoint (chosen with the true reward)"),
+                    (chosen.without_ground_truth, "selected_without_ground_truth", "chosen without the true reward"),
+                ];
+                for (step, name, label) in marks {
+                    if step == Some(c.step) {
+                        rec.marker(&format!("{e}/{name}"), "env_step", c.step as i64, mean, label);
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -105,6 +143,7 @@ pub fn record(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name:
     for (e, xy) in unseen {
         rec.points(&format!("reward/{e}/unseen"), &xy, 2.0);
     }
+    checkpoint_curves(&rec, g, &metrics);
     rec.text("pipeline", &lines.join("\n"));
     rec.finish(path)
 }
