@@ -228,7 +228,7 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
     let cfg = trex::TrexConfig { iterations: args.iterations, ..Default::default() };
     let ranking = trex::Ranking::by_score(train.iter().map(|t| -t.meta.noise).collect());
     let start = Instant::now();
-    let (model, reports) = trex::train(&train, &ranking, &cfg, args.seed)?;
+    let (model, reports) = trex::train(&train, &ranking, &cfg, args.seed, std::thread::available_parallelism().map_or(1, |n| n.get()))?;
     let secs = start.elapsed().as_secs_f64();
     let pred: Vec<f64> = held.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
     let truth: Vec<f64> = held.iter().map(|t| t.ret()).collect();

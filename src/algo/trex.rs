@@ -9,11 +9,11 @@
 use rand::seq::IndexedRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tch::{Kind, Tensor, nn::OptimizerConfig};
+use tch::{Kind, Tensor, nn, nn::Module, nn::OptimizerConfig};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::{RewardConfig, RewardEnsemble, WeightInit};
+use crate::nn::{RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -173,12 +173,12 @@ fn batch(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool) -> (Tensor, 
     (Tensor::from_slice(&rows).view([total as i64, width as i64]), Tensor::from_slice(&seg), Tensor::from_slice(&labels))
 }
 
-fn logits(model: &RewardEnsemble, m: usize, x: &Tensor, seg: &Tensor, n_pairs: usize) -> Tensor {
-    let r = model.forward(m, x);
+fn logits(net: &RewardNet, x: &Tensor, seg: &Tensor, n_pairs: usize) -> Tensor {
+    let r = net.forward(x).squeeze_dim(-1);
     Tensor::zeros([2 * n_pairs as i64], (Kind::Float, tch::Device::Cpu)).index_add(0, seg, &r).view([n_pairs as i64, 2])
 }
 
-fn accuracy(model: &RewardEnsemble, m: usize, trajs: &[Trajectory], pairs: &[Pair], action_input: bool) -> f64 {
+fn accuracy(net: &RewardNet, trajs: &[Trajectory], pairs: &[Pair], action_input: bool) -> f64 {
     if pairs.is_empty() {
         return f64::NAN;
     }
@@ -187,7 +187,7 @@ fn accuracy(model: &RewardEnsemble, m: usize, trajs: &[Trajectory], pairs: &[Pai
         for chunk in pairs.chunks(256) {
             let refs: Vec<&Pair> = chunk.iter().collect();
             let (x, seg, labels) = batch(trajs, &refs, action_input);
-            let pred = logits(model, m, &x, &seg, chunk.len()).argmax(1, false);
+            let pred = logits(net, &x, &seg, chunk.len()).argmax(1, false);
             correct += pred.eq_tensor(&labels).sum(Kind::Float).double_value(&[]);
         }
         correct / pairs.len() as f64
@@ -195,7 +195,17 @@ fn accuracy(model: &RewardEnsemble, m: usize, trajs: &[Trajectory], pairs: &[Pai
 }
 
 /// Trains an ensemble on ranked trajectories; returns it with one report per model.
-pub fn train(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, seed: u64) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
+///
+/// The models train concurrently on up to `workers` threads, each model on one thread with
+/// its own generator: the result does not depend on `workers` (libtorch itself must run
+/// single-threaded, see [`crate::nn::single_threaded`]).
+pub fn train(
+    trajs: &[Trajectory],
+    ranking: &Ranking,
+    cfg: &TrexConfig,
+    seed: u64,
+    workers: usize,
+) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
     if trajs.is_empty() || trajs.len() != ranking.scores.len() {
         return Err(Error::Invalid("T-REX needs one score per trajectory and at least two trajectories".into()));
     }
@@ -208,22 +218,65 @@ pub fn train(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, seed: u6
         clip: 100.0,
         init: cfg.init,
     };
-    let model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
-    let mut reports = Vec::new();
-    for m in 0..cfg.models {
+    let mut model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
+    // Tensors cannot be shared between threads, only moved: each worker owns its models.
+    let workers = workers.clamp(1, cfg.models);
+    let mut owned: Vec<Vec<(usize, nn::VarStore, RewardNet)>> = (0..workers).map(|_| Vec::new()).collect();
+    for (m, (store, net)) in model.stores.drain(..).zip(model.nets.drain(..)).enumerate() {
+        owned[m % workers].push((m, store, net));
+    }
+    let mut done: Vec<(usize, nn::VarStore, RewardNet, Result<ModelReport>)> = std::thread::scope(|scope| {
+        let handles: Vec<_> = owned
+            .into_iter()
+            .map(|mine| {
+                scope.spawn(move || {
+                    // OpenMP's thread count is per thread: set it in this one too.
+                    crate::nn::single_threaded();
+                    mine.into_iter()
+                        .map(|(m, store, net)| {
+                            let report = train_model(&store, &net, m, trajs, ranking, cfg, seed);
+                            (m, store, net, report)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles.into_iter().flat_map(|h| h.join().expect("a T-REX worker panicked")).collect()
+    });
+    done.sort_by_key(|d| d.0);
+    let mut reports = Vec::with_capacity(done.len());
+    for (_, store, net, report) in done {
+        model.stores.push(store);
+        model.nets.push(net);
+        reports.push(report?);
+    }
+    Ok((model, reports))
+}
+
+/// Trains model `m` of the ensemble on its own pairs.
+fn train_model(
+    store: &nn::VarStore,
+    net: &RewardNet,
+    m: usize,
+    trajs: &[Trajectory],
+    ranking: &Ranking,
+    cfg: &TrexConfig,
+    seed: u64,
+) -> Result<ModelReport> {
+    {
         let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
         let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
         let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
         let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
-        let mut opt = tch::nn::Adam::default().build(&model.stores[m], cfg.lr)?;
+        let mut opt = tch::nn::Adam::default().build(store, cfg.lr)?;
         let mut final_loss = f64::NAN;
         let mut curve = Vec::new();
         for it in 0..cfg.iterations {
             let picks: Vec<&Pair> = (0..cfg.batch_size).map(|_| &train[rng.random_range(0..train.len())]).collect();
             let (x, seg, labels) = batch(trajs, &picks, cfg.action_input);
-            let lg = logits(&model, m, &x, &seg, picks.len());
+            let lg = logits(net, &x, &seg, picks.len());
             let ce = lg.cross_entropy_for_logits(&labels);
-            let loss = &ce + cfg.l2 * model.nets[m].weight_l2();
+            let loss = &ce + cfg.l2 * net.weight_l2();
             opt.backward_step(&loss);
             final_loss = ce.double_value(&[]);
             if it % 50 == 0 || it + 1 == cfg.iterations {
@@ -231,16 +284,15 @@ pub fn train(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, seed: u6
                 curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
             }
         }
-        reports.push(ModelReport {
+        Ok(ModelReport {
             train_pairs: train.len(),
             val_pairs: val.len(),
             final_loss,
-            train_accuracy: accuracy(&model, m, trajs, train, cfg.action_input),
-            val_accuracy: accuracy(&model, m, trajs, val, cfg.action_input),
+            train_accuracy: accuracy(net, trajs, train, cfg.action_input),
+            val_accuracy: accuracy(net, trajs, val, cfg.action_input),
             curve,
-        });
+        })
     }
-    Ok((model, reports))
 }
 
 #[cfg(test)]
@@ -295,7 +347,7 @@ mod tests {
             l2: 0.0,
             ..Default::default()
         };
-        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 1).unwrap();
+        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 1, 2).unwrap();
         assert!(reports.iter().all(|r| r.val_accuracy > 0.85), "{reports:?}");
         let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();

@@ -11,6 +11,10 @@ pub struct StoreArgs {
     /// Artifact store directory.
     #[arg(long, default_value = "artifacts")]
     pub store: PathBuf,
+    /// Also recompute N artifacts (all without N) in scratch directories and report any
+    /// whose bytes differ from the stored ones.
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "all")]
+    pub recompute: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -34,6 +38,27 @@ pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
     println!("{} artifacts, {} corrupt", keys.len(), bad.len());
     if !bad.is_empty() {
         bail!("{} corrupt artifacts in {}; `idrex pipeline run` recomputes them", bad.len(), args.store.display());
+    }
+    if let Some(n) = &args.recompute {
+        let n = match n.as_str() {
+            "all" => keys.len(),
+            n => n.parse::<usize>().map_err(|_| anyhow::anyhow!("--recompute {n}: give a number of artifacts, or nothing for all"))?,
+        };
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let mut differ = 0;
+        for k in keys.iter().take(n) {
+            let r = crate::pipeline::recompute::recompute(&store, k, threads)?;
+            if r.differing.is_empty() {
+                println!("same    {} {}", &k[..12], r.node);
+            } else {
+                differ += 1;
+                println!("DIFFERS {} {}: {}", &k[..12], r.node, r.differing.join(", "));
+            }
+        }
+        println!("{} recomputed, {differ} differ", n.min(keys.len()));
+        if differ > 0 {
+            bail!("{differ} artifacts changed when recomputed: their bytes do not depend on their key alone");
+        }
     }
     Ok(())
 }

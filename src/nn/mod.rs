@@ -23,6 +23,14 @@ pub fn seeded<T>(seed: u64, f: impl FnOnce() -> T) -> T {
     f()
 }
 
+/// Makes libtorch's operators single-threaded (a process-wide setting). Their results can
+/// depend on the number of threads (reduction order), and stage outputs must depend only on
+/// the stage's definition; stages parallelise over stages, ensemble members and
+/// environments instead.
+pub fn single_threaded() {
+    tch::set_num_threads(1);
+}
+
 /// tanh in f32 as a rational minimax approximation (Eigen's `ptanh_float` coefficients):
 /// within a few ulp of `f32::tanh`, branch-free and vectorisable. libm's tanhf (through
 /// expm1f) took a third of a PPO run's time.

@@ -6,6 +6,7 @@ pub mod config;
 pub mod graph;
 pub mod idrex;
 pub mod plots;
+pub mod recompute;
 pub mod runner;
 pub mod stage;
 

@@ -81,6 +81,22 @@ pub fn sha256_file(path: &Path) -> Result<(String, u64)> {
     Ok((hex(&h.finalize()), size))
 }
 
+/// Every file under `dir` but the manifest, with its sha256 and size, in path order.
+pub fn hash_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
+    let mut files: Vec<PathBuf> =
+        walkdir::WalkDir::new(dir).into_iter().filter_map(|e| e.ok()).filter(|e| e.file_type().is_file()).map(|e| e.into_path()).collect();
+    files.sort();
+    let mut out = Vec::with_capacity(files.len());
+    for f in &files {
+        let rel = f.strip_prefix(dir).expect("under the directory").to_string_lossy().into_owned();
+        if rel != MANIFEST {
+            let (sha256, size) = sha256_file(f)?;
+            out.push(OutputFile { path: rel, sha256, size });
+        }
+    }
+    Ok(out)
+}
+
 pub fn now_unix() -> f64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
 }
@@ -182,22 +198,10 @@ impl Store {
     /// The caller holds the key's lock.
     pub fn publish(&self, staging: Staging, mut manifest: Manifest) -> Result<Manifest> {
         manifest.key = staging.key.clone();
-        manifest.outputs.clear();
-        let mut files: Vec<PathBuf> = walkdir::WalkDir::new(&staging.dir)
-            .into_iter()
-            .filter_map(|e| e.ok())
-            .filter(|e| e.file_type().is_file())
-            .map(|e| e.into_path())
-            .collect();
-        files.sort();
-        for f in &files {
-            let rel = f.strip_prefix(&staging.dir).expect("under the staging dir").to_string_lossy().into_owned();
-            if rel == MANIFEST {
-                continue;
-            }
-            let (sha256, size) = sha256_file(f)?;
-            manifest.outputs.push(OutputFile { path: rel, sha256, size });
-            File::open(f).and_then(|h| h.sync_all()).map_err(|e| Error::io(f, e))?;
+        manifest.outputs = hash_outputs(&staging.dir)?;
+        for o in &manifest.outputs {
+            let f = staging.dir.join(&o.path);
+            File::open(&f).and_then(|h| h.sync_all()).map_err(|e| Error::io(&f, e))?;
         }
         let mpath = staging.dir.join(MANIFEST);
         let text = serde_json::to_string_pretty(&manifest).expect("a manifest serialises");

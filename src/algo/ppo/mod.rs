@@ -56,7 +56,7 @@ pub struct PpoConfig {
     pub obs_clip: f64,
     pub reward_clip: f64,
     pub hidden: Vec<usize>,
-    /// Threads for libtorch and for stepping the environments.
+    /// Threads for stepping the environments (libtorch runs single-threaded in stages).
     pub threads: usize,
     /// Evaluate (stochastic policy, ground-truth reward) every this many steps; 0: never.
     pub eval_every: usize,
@@ -175,7 +175,6 @@ pub fn train(
     mut checkpoint: Option<SaveCheckpoint>,
 ) -> Result<PpoResult> {
     let started = Instant::now();
-    tch::set_num_threads(cfg.threads.max(1) as i32);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut envs = VecEnv::new(id, cfg.num_envs, seed, cfg.threads)?;
     let (n, od, ad) = (cfg.num_envs, envs.obs_dim(), envs.act_dim());

@@ -31,8 +31,7 @@ pub struct DemonstratorMetrics {
 }
 
 pub fn demonstrator(p: &DemonstratorParams, ctx: &StageCtx) -> Result<DemonstratorMetrics> {
-    let mut cfg = p.ppo.clone();
-    cfg.threads = ctx.threads;
+    let cfg = p.ppo.clone();
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut reached = None;
     let mut on_update = |u: &ppo::PpoProgress| {

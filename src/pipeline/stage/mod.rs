@@ -100,8 +100,10 @@ macro_rules! stage_kinds {
             }
         }
 
-        /// Runs a stage body.
+        /// Runs a stage body. Its outputs depend only on its parameters, seed and inputs:
+        /// `ctx.threads` is a budget for work whose result does not depend on it.
         pub fn run(params: &Params, ctx: &StageCtx) -> Result<Metrics> {
+            crate::nn::single_threaded();
             match params { $(Params::$kind(p) => $body(p, ctx).map(Metrics::$kind),)* }
         }
     };
@@ -160,6 +162,7 @@ pub struct StageCtx<'a> {
     /// Input role -> artifact directory.
     pub inputs: BTreeMap<String, PathBuf>,
     pub out: &'a Path,
+    /// Threads the stage may use for work whose result does not depend on their number.
     pub threads: usize,
     pub progress: &'a indicatif::ProgressBar,
 }

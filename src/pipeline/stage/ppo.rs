@@ -37,8 +37,7 @@ pub struct PpoMetrics {
 pub const CURVE: &str = "curve.csv";
 
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
-    let mut cfg = p.ppo.clone();
-    cfg.threads = ctx.threads;
+    let cfg = p.ppo.clone();
     let reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut on_update = |u: &ppo::PpoProgress| {

@@ -74,7 +74,7 @@ pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
         }
     }
     ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
-    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed)?;
+    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed, ctx.threads)?;
     model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
     let score = |ts: &[Trajectory]| Scored {
         predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
