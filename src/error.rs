@@ -27,6 +27,10 @@ pub enum Error {
     #[error("{0}")]
     Invalid(String),
 
+    /// Training produced non-finite or exploding numbers: a result, but not one to publish.
+    #[error("{0}")]
+    Diverged(String),
+
     #[error(transparent)]
     Tch(#[from] tch::TchError),
 }

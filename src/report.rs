@@ -304,6 +304,14 @@ pub fn build(store: &Store) -> Result<Tables> {
     Ok(Tables { returns, protocols, runs, demos, accuracy })
 }
 
+/// A figure with one decimal; never "NaN" (a figure that could not be computed says so).
+fn num(x: Option<f64>) -> String {
+    match x {
+        Some(v) if v.is_finite() => format!("{v:.1}"),
+        _ => "n/a".into(),
+    }
+}
+
 fn cell_f(df: &DataFrame, name: &str, i: usize) -> Option<f64> {
     df.column(name).ok()?.cast(&DataType::Float64).ok()?.f64().ok()?.get(i)
 }
@@ -320,7 +328,7 @@ pub fn markdown(t: &Tables) -> String {
     rows.dedup();
     for (env, pipe) in &rows {
         let demo_row = (0..t.demos.height()).find(|&i| &cell_s(&t.demos, "env", i) == env && &cell_s(&t.demos, "pipeline", i) == pipe);
-        let f = |x: Option<f64>| x.map_or("missing".to_string(), |v| format!("{v:.1}"));
+        let f = |x: Option<f64>| x.map_or("missing".to_string(), |v| num(Some(v)));
         out.push_str(&format!(
             "| {env} | {pipe} | {} | {} |",
             f(demo_row.and_then(|i| cell_f(&t.demos, "demos_avg", i))),
@@ -352,10 +360,10 @@ pub fn markdown(t: &Tables) -> String {
                         format!("; run {} missing", missing.join(", "))
                     };
                     format!(
-                        " {:.1} ± {:.1} ({:.1}{}{missing}) |",
-                        cell_f(&t.returns, "mean", i).unwrap_or(f64::NAN),
-                        cell_f(&t.returns, "std", i).unwrap_or(f64::NAN),
-                        cell_f(&t.returns, "best_run_avg", i).unwrap_or(f64::NAN),
+                        " {} ± {} ({}{}{missing}) |",
+                        num(cell_f(&t.returns, "mean", i)),
+                        num(cell_f(&t.returns, "std", i)),
+                        num(cell_f(&t.returns, "best_run_avg", i)),
                         if m == Method::Bc.name() { String::new() } else { format!(", {runs:.0} runs") }
                     )
                 }
@@ -366,7 +374,7 @@ pub fn markdown(t: &Tables) -> String {
     }
     out.push_str("\n## Learned reward on unseen evaluation rollouts (mean over runs)\n\n| env | method | Pearson | Spearman | pairwise accuracy | runs |\n|---|---|---|---|---|---|\n");
     for i in 0..t.accuracy.height() {
-        let g = |c: &str| cell_f(&t.accuracy, c, i).map_or("-".into(), |v| format!("{v:.3}"));
+        let g = |c: &str| cell_f(&t.accuracy, c, i).filter(|v| v.is_finite()).map_or("n/a".into(), |v| format!("{v:.3}"));
         out.push_str(&format!(
             "| {} | {} | {} | {} | {} | {} |\n",
             cell_s(&t.accuracy, "env", i),
@@ -402,8 +410,9 @@ fn protocols_markdown(rows: &[ProtocolRow]) -> String {
                     None => " missing |".to_string(),
                     Some(r) => {
                         let step = r.step.map_or(String::new(), |s| format!(" @{s}"));
-                        let gap = r.gap_to_best.map_or(String::new(), |g| format!("; {g:.1} below the best"));
-                        format!(" {:.1} ± {:.1} [{:.1}, {:.1}]{step}{gap} |", r.stats.mean, r.stats.std, r.ci.0, r.ci.1)
+                        let gap = r.gap_to_best.map_or(String::new(), |g| format!("; {} below the best", num(Some(g))));
+                        let [mean, std, lo, hi] = [r.stats.mean, r.stats.std, r.ci.0, r.ci.1].map(|x| num(Some(x)));
+                        format!(" {mean} ± {std} [{lo}, {hi}]{step}{gap} |")
                     }
                 });
             }

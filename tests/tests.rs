@@ -5,3 +5,4 @@ mod bootstrap;
 mod env_cli;
 mod env_equivalence;
 mod pipeline;
+mod reliability;

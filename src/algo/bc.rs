@@ -95,11 +95,17 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCr
     let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
     let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
     let nt = train.len();
-    for _ in 0..cfg.iterations {
+    for it in 0..cfg.iterations {
         let picks: Vec<i64> = (0..cfg.batch_size.min(nt)).map(|_| rng.random_range(0..nt) as i64).collect();
         let b = Tensor::from_slice(&picks);
         let loss = mse(&policy, &xt.index_select(0, &b), &yt.index_select(0, &b)) + cfg.l2 * policy.actor.weight_l2();
         opt.backward_step(&loss);
+        if it % 100 == 0 || it + 1 == cfg.iterations {
+            let l = loss.double_value(&[]);
+            if !l.is_finite() {
+                return Err(Error::Diverged(format!("BC diverged at iteration {it}: the loss is {l}; lower bc.lr (now {})", cfg.lr)));
+            }
+        }
     }
     let report = tch::no_grad(|| BcReport {
         train_steps: train.len(),

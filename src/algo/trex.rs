@@ -279,6 +279,13 @@ fn train_model(
             let loss = &ce + cfg.l2 * net.weight_l2();
             opt.backward_step(&loss);
             final_loss = ce.double_value(&[]);
+            // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
+            if !final_loss.is_finite() || final_loss > 1e3 {
+                return Err(Error::Diverged(format!(
+                    "T-REX model {m} diverged at iteration {it}: the pair loss is {final_loss:.3e}; lower trex.lr (now {})",
+                    cfg.lr
+                )));
+            }
             if it % 50 == 0 || it + 1 == cfg.iterations {
                 let acc = lg.argmax(1, false).eq_tensor(&labels).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]);
                 curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });

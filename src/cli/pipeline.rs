@@ -94,11 +94,15 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     plots::record(&g, &outcomes, &store, &rec, &p.name)?;
     println!("recording: {}", rec.display());
     if !failed.is_empty() {
-        for o in &failed {
-            match &o.status {
-                Status::Failed { error, log } => eprintln!("failed: {} ({}): {error}; log: {}", o.node, &o.key[..12], log.display()),
-                Status::Skipped { because } => eprintln!("skipped: {} (its input {because} failed)", o.node),
-                Status::Cached | Status::Computed { .. } => {}
+        // One line per failed stage: its cause, its log, and how much it held up.
+        for o in &outcomes {
+            if let Status::Failed { error, log } = &o.status {
+                let held_up = g
+                    .descendants(&o.node)
+                    .iter()
+                    .filter(|d| outcomes.iter().any(|x| &x.node == *d && matches!(x.status, Status::Skipped { .. })))
+                    .count();
+                eprintln!("failed: {} ({}): {error}; log: {}; {held_up} stages after it skipped", o.node, &o.key[..12], log.display());
             }
         }
         bail!("{} of {} stages did not complete", failed.len(), outcomes.len());

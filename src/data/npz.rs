@@ -16,14 +16,18 @@ struct Array {
 }
 
 fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
-    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+    if bytes.len() < 12 || &bytes[..6] != b"\x93NUMPY" {
         return Err(format!("{name} is not a .npy array"));
     }
-    let (hlen, start) = match bytes[6] {
+    let (hlen, start): (usize, usize) = match bytes[6] {
         1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
-        _ => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
+        2 | 3 => (u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize, 12),
+        v => return Err(format!("{name}: .npy format version {v} is not supported")),
     };
-    let header = std::str::from_utf8(&bytes[start..start + hlen]).map_err(|_| format!("{name}: bad header"))?;
+    let header = bytes
+        .get(start..start.saturating_add(hlen))
+        .and_then(|h| std::str::from_utf8(h).ok())
+        .ok_or(format!("{name}: malformed .npy header"))?;
     let field = |key: &str| -> Option<&str> {
         let i = header.find(&format!("'{key}'"))? + key.len() + 2;
         Some(header[i..].trim_start_matches([':', ' ']))
@@ -41,7 +45,7 @@ fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
         .map(|s| s.parse().map_err(|_| format!("{name}: bad shape")))
         .collect::<std::result::Result<_, _>>()?;
     let body = &bytes[start + hlen..];
-    let n: usize = shape.iter().product();
+    let n = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).ok_or(format!("{name}: shape {shape:?} is too large"))?;
     let data: Vec<f64> = match descr {
         "<f8" => body.chunks_exact(8).take(n).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect(),
         "<f4" => body.chunks_exact(4).take(n).map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64).collect(),
@@ -76,9 +80,20 @@ pub fn read(path: &Path, source: &str) -> Result<Vec<Trajectory>> {
             obs.shape, actions.shape, rewards.shape
         )));
     }
+    if lengths.data.is_empty() {
+        return Err(bad("holds no episodes (episode_lengths is empty)".into()));
+    }
+    if let Some((e, l)) = lengths.data.iter().enumerate().find(|(_, l)| !(l.fract() == 0.0 && **l >= 1.0)) {
+        return Err(bad(format!("episode_lengths[{e}] is {l}; every length must be a whole number of steps, at least 1")));
+    }
     let total: f64 = lengths.data.iter().sum();
     if total as usize != t {
         return Err(bad(format!("episode_lengths sum to {total}, but there are {t} steps")));
+    }
+    for (name, a) in [("obs", &obs), ("actions", &actions), ("rewards", &rewards)] {
+        if let Some(i) = a.data.iter().position(|x| !x.is_finite()) {
+            return Err(bad(format!("{name} holds a non-finite value ({}) at flat index {i}", a.data[i])));
+        }
     }
     let (od, ad) = (obs.shape[1], actions.shape[1]);
     let mut out = Vec::new();

@@ -141,7 +141,10 @@ pub fn read(path: &Path) -> Result<Rollouts> {
     let act_dim: usize = meta.get("act_dim").and_then(|d| d.parse().ok()).unwrap_or(0);
     let mut learned: Vec<Vec<f64>> = Vec::new();
     let mut any_learned = false;
-    for msg in mcap::MessageStream::new(&buf).map_err(|e| corrupt(path, e))? {
+    // Chunk CRCs catch a flipped byte inside compressed data, which zstd may not.
+    let stream =
+        mcap::MessageStream::new_with_options(&buf, mcap::read::Options::ValidateChunkCrcs.into()).map_err(|e| corrupt(path, e))?;
+    for msg in stream {
         let msg = msg.map_err(|e| corrupt(path, e))?;
         let v: serde_json::Value = serde_json::from_slice(&msg.data).map_err(|e| corrupt(path, e))?;
         let bad = |what: &str| corrupt(path, format!("message {} on {} has no valid {what}", msg.sequence, msg.channel.topic));

@@ -20,8 +20,14 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
 }
 
 /// Writes the variables of all `stores` (whose names must not collide) to one file.
+/// Writes every variable of `stores` to `path`; refuses non-finite weights, which only a
+/// diverged training makes and which must never be published.
 pub fn save_weights(stores: &[&VarStore], path: &Path) -> Result<()> {
-    let named: Vec<(String, tch::Tensor)> = stores.iter().flat_map(|vs| vs.variables()).collect();
+    let mut named: Vec<(String, tch::Tensor)> = stores.iter().flat_map(|vs| vs.variables()).collect();
+    named.sort_by(|a, b| a.0.cmp(&b.0));
+    if let Some((name, _)) = named.iter().find(|(_, t)| !bool::try_from(t.isfinite().all()).unwrap_or(false)) {
+        return Err(Error::Diverged(format!("weight {name} is not finite (training diverged); nothing was saved to {}", path.display())));
+    }
     tch::Tensor::write_safetensors(&named, path).map_err(|e| Error::file(path, format!("cannot write weights: {e}")))
 }
 

@@ -261,6 +261,12 @@ impl Pipeline {
             let (line, column) = locate(text, keys);
             ConfigError { file: path.into(), line, column, message }
         };
+        if let Ok(doc) = serde_yaml::from_str::<serde_yaml::Value>(text)
+            && let Some(keys) = non_finite(&doc, &mut Vec::new())
+        {
+            let keys: Vec<&str> = keys.iter().map(String::as_str).collect();
+            return Err(at(&keys, format!("{} is not a finite number; write a finite value", keys.join("."))));
+        }
         let spec: PipelineFile = serde_yaml::from_str(text).map_err(|e| {
             let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
             let msg = e.to_string();
@@ -361,6 +367,8 @@ impl Pipeline {
                     format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()),
                 ));
             }
+            // Bad data is refused now, before any stage runs.
+            crate::pipeline::stage::demos::load(&p, env).map_err(|e| at(&["demos", "from"], format!("demonstration file {e}")))?;
         }
         let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
         Ok(Pipeline { file: path.into(), name, env, store, spec, composition })
@@ -383,6 +391,21 @@ impl Pipeline {
             None => base.clone(),
             Some(v) => serde_json::from_value(merge(serde_json::to_value(base).expect("serialises"), v)).expect("validated at load"),
         }
+    }
+}
+
+/// The key path of the first non-finite number (`.nan`, `.inf`) in a YAML document.
+fn non_finite(v: &serde_yaml::Value, path: &mut Vec<String>) -> Option<Vec<String>> {
+    match v {
+        serde_yaml::Value::Number(n) if n.as_f64().is_some_and(|x| !x.is_finite()) => Some(path.clone()),
+        serde_yaml::Value::Mapping(m) => m.iter().find_map(|(k, v)| {
+            path.push(k.as_str().unwrap_or_default().to_string());
+            let found = non_finite(v, path);
+            path.pop();
+            found
+        }),
+        serde_yaml::Value::Sequence(s) => s.iter().find_map(|v| non_finite(v, path)),
+        _ => None,
     }
 }
 
@@ -453,6 +476,10 @@ mod tests {
         );
         assert!(
             err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      lr: fast\n").contains("p.yaml:5:5: overrides.drex.ppo")
+        );
+        assert_eq!(err("version: 1\nenv: Hopper-v5\nbc:\n  lr: .nan\n"), "p.yaml:4:3: bc.lr is not a finite number; write a finite value");
+        assert!(
+            err("version: 1\nenv: Hopper-v5\nnoise:\n  schedule: [0.0, .inf]\n").starts_with("p.yaml:4:3: noise.schedule is not a finite")
         );
         let noise = err("version: 1\nenv: Hopper-v5\nidrex:\n  action_noise: pink\n");
         assert!(noise.contains("unknown variant `pink`, expected one of `gaussian`, `ou`, `time-correlated`"), "{noise}");

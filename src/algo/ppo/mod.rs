@@ -251,6 +251,15 @@ pub fn train(
             &mut rng,
         )?;
 
+        if !(stats.policy_loss.is_finite() && stats.value_loss.is_finite()) || rewards.iter().any(|r| !r.is_finite()) {
+            return Err(Error::Diverged(format!(
+                "PPO diverged at update {update} (step {global_step}): policy loss {}, value loss {}{}; lower ppo.lr (now {})",
+                stats.policy_loss,
+                stats.value_loss,
+                if rewards.iter().any(|r| !r.is_finite()) { ", non-finite rewards" } else { "" },
+                cfg.lr
+            )));
+        }
         let var_y = variance(&returns);
         let resid: Vec<f32> = returns.iter().zip(&buf.values).map(|(r, v)| r - v).collect();
         agent.obs_norm = Some(norm.obs.clone());

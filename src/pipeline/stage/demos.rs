@@ -1,11 +1,11 @@
 //! Where the demonstrations come from: a demonstrator trained with PPO on the true reward
 //! (`demonstrator`) and its rollouts (`demos`), or a file of someone else's
 //! (`demos-import`: MCAP in our schema, or NPZ as the original D-REX code stored them).
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use super::{RolloutSummary, StageCtx, load_policy_for, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
-use crate::data::TrajMeta;
+use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::log::mcap;
@@ -82,27 +82,42 @@ pub struct ImportParams {
 }
 
 pub fn import(p: &ImportParams, ctx: &StageCtx) -> Result<RolloutSummary> {
-    let trajs = if p.path.extension().is_some_and(|e| e == "mcap") {
-        mcap::read(&p.path)?.trajectories
-    } else {
-        crate::data::npz::read(&p.path, "imported")?
-    };
-    let env = Env::new(p.env)?;
-    if let Some(t) = trajs.first()
-        && (t.obs_dim, t.act_dim) != (env.obs_dim(), env.act_dim())
-    {
-        return Err(Error::file(
-            &p.path,
-            format!(
-                "has {}-dim observations and {}-dim actions; {} has {} and {}",
-                t.obs_dim,
-                t.act_dim,
-                p.env,
-                env.obs_dim(),
-                env.act_dim()
-            ),
-        ));
-    }
+    let trajs = load(&p.path, p.env)?;
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(RolloutSummary::of(&trajs))
+}
+
+/// Demonstrations from a file (MCAP in our rollout schema, or NPZ), checked for use in `env`:
+/// at least one episode, the environment's dimensions, finite numbers, and for MCAP the
+/// environment it was recorded in. Pipelines call this when they load, before any stage.
+pub fn load(path: &Path, env: EnvId) -> Result<Vec<Trajectory>> {
+    let trajs = if path.extension().is_some_and(|e| e == "mcap") {
+        let r = mcap::read(path)?;
+        if r.env != env.name() {
+            return Err(Error::file(path, format!("was recorded in {}, but this pipeline's environment is {env}", r.env)));
+        }
+        r.trajectories
+    } else {
+        crate::data::npz::read(path, "imported")?
+    };
+    if trajs.is_empty() {
+        return Err(Error::file(path, "holds no episodes"));
+    }
+    let e = Env::new(env)?;
+    for (i, t) in trajs.iter().enumerate() {
+        if (t.obs_dim, t.act_dim) != (e.obs_dim(), e.act_dim()) {
+            return Err(Error::file(
+                path,
+                format!("has {}-dim observations and {}-dim actions; {env} has {} and {}", t.obs_dim, t.act_dim, e.obs_dim(), e.act_dim()),
+            ));
+        }
+        if t.is_empty() {
+            return Err(Error::file(path, format!("episode {i} has no steps")));
+        }
+        let finite = t.obs.iter().chain(&t.actions).all(|x| x.is_finite()) && t.rewards.iter().all(|x| x.is_finite());
+        if !finite {
+            return Err(Error::file(path, format!("episode {i} holds a non-finite observation, action or reward")));
+        }
+    }
+    Ok(trajs)
 }
