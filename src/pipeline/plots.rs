@@ -10,7 +10,7 @@ use super::graph::Graph;
 use super::runner::{Outcome, Status};
 use super::stage::eval::EvalMetrics;
 use super::stage::{DegradationLevel, Metrics};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::log::rerun::Recording;
 use crate::store::Store;
 
@@ -68,7 +68,20 @@ fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Optio
     }
 }
 
+/// Writes the recording next to `path` and renames it into place, so that a failure (a full
+/// disk) never leaves the previous recording truncated.
 pub fn record(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(format!(".tmp-{}", std::process::id()));
+    let tmp = std::path::PathBuf::from(tmp);
+    let written = draw(g, outcomes, store, &tmp, name).and_then(|_| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str) -> Result<()> {
     let rec = Recording::create(path, name)?;
     let done: BTreeMap<&str, &str> = outcomes
         .iter()

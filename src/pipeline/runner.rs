@@ -47,22 +47,6 @@ pub struct RunOptions {
 
 pub type StageBody = dyn Fn(&Node, &StageCtx) -> Result<Value> + Sync;
 
-/// Removes staging directories left by processes that no longer exist (killed mid-stage).
-fn clean_stale_staging(store: &Store) {
-    let tmp = store.root().join(".tmp");
-    let Ok(entries) = std::fs::read_dir(&tmp) else { return };
-    for e in entries.flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        let pid = name.split('.').nth(1).and_then(|p| p.parse::<u32>().ok());
-        if let Some(pid) = pid
-            && pid != std::process::id()
-            && !std::path::Path::new(&format!("/proc/{pid}")).exists()
-        {
-            let _ = std::fs::remove_dir_all(e.path());
-        }
-    }
-}
-
 fn run_node(
     node: &Node,
     key: &str,
@@ -77,13 +61,15 @@ fn run_node(
         if !forced && store.lookup(key)?.is_some() {
             return Ok(Status::Cached);
         }
-        let _lock = store.lock(key)?;
-        if store.lookup(key)?.is_some() {
-            if !forced {
-                return Ok(Status::Cached); // published by a concurrent run while we waited
-            }
-            std::fs::remove_dir_all(store.dir(key)).map_err(|e| Error::io(store.dir(key), e))?;
+        let _lock = store.lock_or_wait(key, &mut |who| {
+            let line = format!("waiting for {}: {who} holds its lock", node.name);
+            if bar.is_hidden() { eprintln!("{line}") } else { bar.set_message(line) }
+        })?;
+        if !forced && store.lookup(key)?.is_some() {
+            return Ok(Status::Cached); // published by a concurrent run while we waited
         }
+        // A forced node is computed to the side; the stored artifact stays until the new one
+        // replaces it.
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();
@@ -123,7 +109,7 @@ fn run_node(
             wall_s,
             idrex_version: env!("CARGO_PKG_VERSION").to_string(),
         };
-        store.publish(staging, manifest)?;
+        store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })
     };
     match attempt() {
@@ -147,7 +133,8 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             return Err(Error::Invalid(format!("--force {f}: no such node; the nodes are {}", names.join(", "))));
         }
     }
-    clean_stale_staging(store);
+    let _using = store.in_use()?;
+    store.clean_stale_staging();
     let keys = graph.keys();
     let jobs = opts.jobs.max(1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -274,6 +261,14 @@ mod tests {
         assert!(matches!(out[2].status, Status::Computed { .. }));
         assert_eq!(out[3].status, Status::Skipped { because: "b".into() });
         assert!(!store.dir(&out[1].key).exists(), "nothing of the failed stage is published");
+
+        // A forced recomputation that fails leaves the stored artifact as it was.
+        let failing = |n: &Node, ctx: &StageCtx| if n.name == "c" { Err(Error::Invalid("boom".into())) } else { body(n, ctx) };
+        let before = value(&store, &out[2]);
+        let forced = run(&bad, &store, &opts(&["c"]), &failing).unwrap();
+        assert!(matches!(forced[2].status, Status::Failed { .. }));
+        assert_eq!(value(&store, &out[2]), before);
+        assert!(store.check(&out[2].key).is_ok());
         std::fs::remove_dir_all(&root).unwrap();
     }
 }

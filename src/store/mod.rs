@@ -6,15 +6,20 @@
 //! (every output's sha256 and size, metrics, times, idrex version).
 //!
 //! Publishing is atomic: a stage writes into `.tmp/<key>.<pid>.<n>` on the same filesystem,
-//! every file and the directory are fsynced, then the directory is renamed to `<key>`. A
-//! crash at any moment leaves at most a stray `.tmp` entry, never a partial `<key>`. A
-//! per-key lock (`.locks/<key>.lock`, an OS file lock, released when the process dies) lets
-//! two runs share a store: the second waits, then finds the artifact published. An artifact
-//! whose files no longer match its manifest is corrupt: it is moved to `.corrupt/` and
-//! recomputed, never used.
+//! every file and the directory are fsynced, then the directory is renamed to `<key>` (or,
+//! when a stored artifact is recomputed on purpose, atomically exchanged with it). A crash at
+//! any moment leaves at most a stray `.tmp` entry, never a partial `<key>`. A staging
+//! directory is owned through an OS file lock on `<dir>.lock`, held while the stage runs and
+//! released by the kernel when the process dies: cleanup removes only staging nobody holds,
+//! whatever PID namespace or process the owner lives in. A per-key lock
+//! (`.locks/<key>.lock`) lets two runs share a store: the second waits, then finds the
+//! artifact published. A pipeline run holds the store's use lock (`.locks/store.lock`)
+//! shared; `gc` takes it exclusively, so it never deletes what a running pipeline uses. An
+//! artifact whose files no longer match its manifest is corrupt: it is moved to `.corrupt/`
+//! and recomputed, never used.
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -111,10 +116,52 @@ pub struct KeyLock {
     _file: File,
 }
 
-/// A stage's output directory before publication.
+/// Holds the store's use lock (shared by pipeline runs, exclusive for gc) until dropped.
+pub struct UseLock {
+    _file: File,
+}
+
+/// A stage's output directory before publication, owned through a lock on `<dir>.lock`.
 pub struct Staging {
     pub dir: PathBuf,
     key: String,
+    _owner: File,
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        // Published (renamed away) or abandoned: either way the directory and its lock go.
+        let _ = std::fs::remove_dir_all(&self.dir);
+        let _ = std::fs::remove_file(lock_path(&self.dir));
+    }
+}
+
+fn lock_path(dir: &Path) -> PathBuf {
+    let mut name = dir.as_os_str().to_owned();
+    name.push(".lock");
+    PathBuf::from(name)
+}
+
+/// Who holds a lock, written into the lock file by its holder: shown to whoever waits.
+fn holder() -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+    format!("pid {} on {}", std::process::id(), host.trim())
+}
+
+unsafe extern "C" {
+    fn renameat2(olddirfd: i32, oldpath: *const std::ffi::c_char, newdirfd: i32, newpath: *const std::ffi::c_char, flags: u32) -> i32;
+}
+
+/// Atomically exchanges two directories (Linux `renameat2(RENAME_EXCHANGE)`).
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    const AT_FDCWD: i32 = -100;
+    const RENAME_EXCHANGE: u32 = 2;
+    let c = |p: &Path| std::ffi::CString::new(p.as_os_str().as_bytes()).map_err(std::io::Error::other);
+    let (a, b) = (c(a)?, c(b)?);
+    // SAFETY: two valid NUL-terminated paths; the call only renames.
+    let rc = unsafe { renameat2(AT_FDCWD, a.as_ptr(), AT_FDCWD, b.as_ptr(), RENAME_EXCHANGE) };
+    if rc == 0 { Ok(()) } else { Err(std::io::Error::last_os_error()) }
 }
 
 static STAGING_COUNTER: AtomicU64 = AtomicU64::new(0);
@@ -137,12 +184,43 @@ impl Store {
         self.root.join(key)
     }
 
-    /// Blocks until this process holds `key`'s lock.
+    /// Blocks until this process holds `key`'s lock; `waiting` is told who holds it first
+    /// when someone does.
     pub fn lock(&self, key: &str) -> Result<KeyLock> {
+        self.lock_or_wait(key, &mut |_| {})
+    }
+
+    pub fn lock_or_wait(&self, key: &str, waiting: &mut dyn FnMut(&str)) -> Result<KeyLock> {
         let path = self.root.join(".locks").join(format!("{key}.lock"));
-        let file = File::options().create(true).truncate(false).write(true).open(&path).map_err(|e| Error::io(&path, e))?;
-        file.lock().map_err(|e| Error::io(&path, e))?;
+        let file = File::options().create(true).truncate(false).read(true).write(true).open(&path).map_err(|e| Error::io(&path, e))?;
+        if file.try_lock().is_err() {
+            let who = std::fs::read_to_string(&path).unwrap_or_default();
+            waiting(if who.trim().is_empty() { "another run" } else { who.trim() });
+            file.lock().map_err(|e| Error::io(&path, e))?;
+        }
+        let _ = file.set_len(0).and_then(|_| (&file).write_all(holder().as_bytes()));
         Ok(KeyLock { _file: file })
+    }
+
+    fn use_lock_file(&self) -> Result<File> {
+        let path = self.root.join(".locks").join("store.lock");
+        File::options().create(true).truncate(false).write(true).open(&path).map_err(|e| Error::io(&path, e))
+    }
+
+    /// Marks the store as in use by a pipeline run (shared with other runs) until dropped.
+    pub fn in_use(&self) -> Result<UseLock> {
+        let file = self.use_lock_file()?;
+        file.lock_shared().map_err(|e| Error::io(self.root.join(".locks/store.lock"), e))?;
+        Ok(UseLock { _file: file })
+    }
+
+    /// The store to itself, for deleting: fails while a pipeline run uses it.
+    pub fn exclusive(&self) -> Result<UseLock> {
+        let file = self.use_lock_file()?;
+        file.try_lock().map_err(|_| {
+            Error::Invalid(format!("a pipeline run is using the store {}; run gc again when it has finished", self.root.display()))
+        })?;
+        Ok(UseLock { _file: file })
     }
 
     /// The manifest of `key` if it is published and intact. A corrupt artifact is moved to
@@ -185,18 +263,41 @@ impl Store {
         std::fs::rename(self.dir(key), &to).map_err(|e| Error::io(self.dir(key), e))
     }
 
-    /// A fresh, empty staging directory for `key`.
+    /// A fresh, empty staging directory for `key`, owned until the [`Staging`] is dropped.
     pub fn stage(&self, key: &str) -> Result<Staging> {
         let n = STAGING_COUNTER.fetch_add(1, Ordering::Relaxed);
         let dir = self.root.join(".tmp").join(format!("{key}.{}.{n}", std::process::id()));
+        let lock = lock_path(&dir);
+        let owner = File::options().create(true).truncate(false).write(true).open(&lock).map_err(|e| Error::io(&lock, e))?;
+        owner.lock().map_err(|e| Error::io(&lock, e))?;
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        Ok(Staging { dir, key: key.to_string() })
+        Ok(Staging { dir, key: key.to_string(), _owner: owner })
     }
 
-    /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place.
-    /// The caller holds the key's lock.
-    pub fn publish(&self, staging: Staging, mut manifest: Manifest) -> Result<Manifest> {
+    /// Removes staging directories nobody owns any more (their process died mid-stage). A
+    /// live run's staging is locked and stays, whatever process or namespace owns it.
+    pub fn clean_stale_staging(&self) {
+        let tmp = self.root.join(".tmp");
+        let Ok(entries) = std::fs::read_dir(&tmp) else { return };
+        for e in entries.flatten() {
+            let path = e.path();
+            if path.extension().is_some_and(|x| x == "lock") {
+                continue;
+            }
+            let lock = lock_path(&path);
+            let Ok(f) = File::options().create(true).truncate(false).write(true).open(&lock) else { continue };
+            if f.try_lock().is_ok() {
+                let _ = std::fs::remove_dir_all(&path);
+                let _ = std::fs::remove_file(&lock);
+            }
+        }
+    }
+
+    /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place; with
+    /// `replace`, a stored artifact is exchanged for the new one atomically (readers see the
+    /// old or the new, never neither). The caller holds the key's lock.
+    pub fn publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
         manifest.key = staging.key.clone();
         manifest.outputs = hash_outputs(&staging.dir)?;
         for o in &manifest.outputs {
@@ -211,23 +312,25 @@ impl Store {
             File::open(d.path()).and_then(|h| h.sync_all()).map_err(|e| Error::io(d.path(), e))?;
         }
         let dest = self.dir(&staging.key);
-        if dest.exists() {
-            // Published by someone else meanwhile (only possible without the lock); keep theirs.
-            let _ = std::fs::remove_dir_all(&staging.dir);
-        } else {
+        if dest.exists() && replace {
+            // The old artifact ends up in the staging directory, removed when it drops.
+            exchange(&staging.dir, &dest).map_err(|e| Error::io(&dest, e))?;
+            File::open(&self.root).and_then(|h| h.sync_all()).map_err(|e| Error::io(&self.root, e))?;
+        } else if !dest.exists() {
             std::fs::rename(&staging.dir, &dest).map_err(|e| Error::io(&dest, e))?;
             File::open(&self.root).and_then(|h| h.sync_all()).map_err(|e| Error::io(&self.root, e))?;
         }
+        // Else published by someone else meanwhile (only possible without the lock): keep theirs.
         Ok(manifest)
     }
 
-    /// Every published artifact's key.
+    /// Every published artifact's key (and anything else that sits where one would).
     pub fn keys(&self) -> Result<Vec<String>> {
         let mut keys = Vec::new();
         for e in std::fs::read_dir(&self.root).map_err(|e| Error::io(&self.root, e))? {
             let e = e.map_err(|e| Error::io(&self.root, e))?;
             let name = e.file_name().to_string_lossy().into_owned();
-            if !name.starts_with('.') && e.path().is_dir() {
+            if !name.starts_with('.') {
                 keys.push(name);
             }
         }
@@ -248,12 +351,15 @@ impl Store {
     /// Removes every artifact not in `keep` (and stale staging entries); returns what was
     /// (or, with `dry_run`, would be) removed.
     pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        let _alone = if dry_run { None } else { Some(self.exclusive()?) };
         let mut removed = Vec::new();
         for k in self.keys()? {
             if !keep.contains(&k) {
                 if !dry_run {
                     let _lock = self.lock(&k)?;
-                    std::fs::remove_dir_all(self.dir(&k)).map_err(|e| Error::io(self.dir(&k), e))?;
+                    let path = self.dir(&k);
+                    let gone = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
+                    gone.map_err(|e| Error::io(&path, e))?;
                 }
                 removed.push(k);
             }
@@ -307,7 +413,7 @@ mod tests {
         let _lock = store.lock(&k).unwrap();
         let s = store.stage(&k).unwrap();
         std::fs::write(s.dir.join("out.txt"), "hello").unwrap();
-        let m = store.publish(s, manifest("t")).unwrap();
+        let m = store.publish(s, manifest("t"), false).unwrap();
         assert_eq!(m.outputs.len(), 1);
         assert_eq!(store.lookup(&k).unwrap().unwrap().outputs[0].size, 5);
         assert!(store.verify().unwrap().is_empty());
@@ -317,6 +423,49 @@ mod tests {
         assert_eq!(bad.len(), 1);
         assert!(bad[0].1.contains("out.txt"), "{bad:?}");
         assert!(store.lookup(&k).unwrap().is_none());
+        assert!(!store.dir(&k).exists());
+        // A plain file where an artifact would be is reported too.
+        std::fs::write(store.dir(&k), "not an artifact").unwrap();
+        assert_eq!(store.verify().unwrap().len(), 1);
+        std::fs::remove_file(store.dir(&k)).unwrap();
+        std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    #[test]
+    fn staging_is_owned_through_its_lock_and_gc_waits_for_runs() {
+        let root = std::env::temp_dir().join(format!("idrex-staging-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let store = Store::open(&root).unwrap();
+        // A live stage's staging survives cleanup, whatever its name says about its pid.
+        let live = store.stage("k1").unwrap();
+        let dead_pid = root.join(".tmp").join("k2.999999999.0");
+        std::fs::create_dir_all(&dead_pid).unwrap();
+        let mut fake_live = dead_pid.clone().into_os_string();
+        fake_live.push(".lock");
+        let held = File::options().create(true).truncate(false).write(true).open(&fake_live).unwrap();
+        held.lock().unwrap();
+        let orphan = root.join(".tmp").join("k3.1.0");
+        std::fs::create_dir_all(&orphan).unwrap();
+        store.clean_stale_staging();
+        assert!(live.dir.exists() && dead_pid.exists(), "owned staging stays");
+        assert!(!orphan.exists(), "unowned staging goes");
+        drop(held);
+        store.clean_stale_staging();
+        assert!(!dead_pid.exists());
+        let dir = live.dir.clone();
+        drop(live);
+        assert!(!dir.exists());
+
+        // gc refuses while a pipeline run uses the store, and deletes nothing.
+        let k = key("t", 1, &serde_json::json!({}), 0, &BTreeMap::new());
+        let s = store.stage(&k).unwrap();
+        store.publish(s, manifest("t"), false).unwrap();
+        let run = store.in_use().unwrap();
+        let err = store.gc(&Default::default(), false).unwrap_err().to_string();
+        assert!(err.contains("a pipeline run is using the store"), "{err}");
+        assert!(store.dir(&k).exists());
+        drop(run);
+        assert_eq!(store.gc(&Default::default(), false).unwrap(), vec![k.clone()]);
         assert!(!store.dir(&k).exists());
         std::fs::remove_dir_all(&root).unwrap();
     }

@@ -183,8 +183,17 @@ impl StageCtx<'_> {
     }
 }
 
+/// The rollouts of a stored input artifact. The runner verified its digests before the
+/// stage started, so a file that fails to read here was written wrong: idrex's bug, not the
+/// store's damage.
 pub fn read_rollouts(dir: &Path) -> Result<Vec<Trajectory>> {
-    Ok(mcap::read(&dir.join(ROLLOUTS))?.trajectories)
+    let path = dir.join(ROLLOUTS);
+    mcap::read(&path).map(|r| r.trajectories).map_err(|e| {
+        Error::Invalid(format!(
+            "cannot read {}, although it matches its recorded digest (a bug in idrex; please report it): {e}",
+            path.display()
+        ))
+    })
 }
 
 pub fn load_policy(dir: &Path) -> Result<ActorCritic> {
