@@ -10,7 +10,16 @@ fn git(dir: &Path, args: &[&str]) {
 }
 
 fn help(clone: &Path) -> String {
-    let out = Command::new(clone.join("dev")).arg("--help").output().unwrap();
+    // A developer's environment, not cargo test's: build scripts rerun when variables that
+    // cargo sets for tests differ, which would rebuild the dependencies.
+    let mut cmd = Command::new(clone.join("dev"));
+    cmd.arg("--help").env_clear();
+    for var in ["PATH", "HOME", "CARGO_HOME", "RUSTUP_HOME", "IDREX_CACHE", "IDREX_PYTHON", "XDG_CACHE_HOME"] {
+        if let Some(v) = std::env::var_os(var) {
+            cmd.env(var, v);
+        }
+    }
+    let out = cmd.output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8_lossy(&out.stdout).into_owned()
 }

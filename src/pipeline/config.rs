@@ -270,8 +270,10 @@ impl Pipeline {
         let spec: PipelineFile = serde_yaml::from_str(text).map_err(|e| {
             let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
             let msg = e.to_string();
-            // serde_yaml appends " at line L column C"; we print the location first.
+            // serde_yaml appends " at line L column C"; we print the location first. It may
+            // quote the file: a short excerpt is enough.
             let msg = msg.split(" at line ").next().unwrap_or(&msg).to_string();
+            let msg = if msg.chars().count() > 200 { format!("{}…", msg.chars().take(200).collect::<String>()) } else { msg };
             let hint = if msg.contains("unknown field") {
                 "; remove it or fix its spelling (the README lists every field)"
             } else if msg.contains("invalid type") {
