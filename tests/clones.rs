@@ -40,7 +40,11 @@ fn each_clone_builds_its_own_sources() {
     let marked = text.replace("Reward learning from automatically ranked demonstrations", "CLONE-A-MARK Reward learning");
     assert_ne!(marked, text, "the marker string is in src/cli/mod.rs");
     std::fs::write(&cli, marked).unwrap();
-    let old = Command::new("find").arg(&b).args(["-path", "*/.git", "-prune", "-o", "-type", "f", "-exec", "touch", "-d", "2001-01-01", "{}", "+"]).status().unwrap();
+    let old = Command::new("find")
+        .arg(&b)
+        .args(["-path", "*/.git", "-prune", "-o", "-type", "f", "-exec", "touch", "-d", "2001-01-01", "{}", "+"])
+        .status()
+        .unwrap();
     assert!(old.success());
     assert!(help(&a).contains("CLONE-A-MARK"), "clone a runs its own code");
     assert!(!help(&b).contains("CLONE-A-MARK"), "clone b runs its own code, not clone a's newer build");

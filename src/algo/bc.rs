@@ -94,6 +94,7 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCr
     config.init = cfg.init;
     let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
     let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
+    let _ftz = crate::nn::FlushDenormals::new();
     let nt = train.len();
     for it in 0..cfg.iterations {
         let picks: Vec<i64> = (0..cfg.batch_size.min(nt)).map(|_| rng.random_range(0..nt) as i64).collect();

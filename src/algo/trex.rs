@@ -269,6 +269,7 @@ fn train_model(
         let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
         let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
         let mut opt = tch::nn::Adam::default().build(store, cfg.lr)?;
+        let _ftz = crate::nn::FlushDenormals::new();
         let mut final_loss = f64::NAN;
         let mut curve = Vec::new();
         for it in 0..cfg.iterations {
