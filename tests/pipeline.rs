@@ -371,3 +371,43 @@ fn bytes_depend_on_the_key_alone() {
     assert!(!v.status.success());
     assert!(stdout(&v).contains("curve.csv") && stdout(&v).contains("28 recomputed, 1 differ"), "{}", stdout(&v));
 }
+
+#[test]
+fn runs_in_two_pid_namespaces_share_a_store() {
+    // Where unshare works (root, or user namespaces allowed): one run sees other pids than
+    // the other, so staging ownership must not be judged by pid.
+    let probe = Command::new("unshare").args(["--pid", "--fork", "--mount-proc", "true"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: unshare --pid is not available here");
+        return;
+    }
+    let dir = TempDir::new("namespaces");
+    let store = dir.join("store");
+    let smoke = repo("pipelines/smoke.yaml");
+    let args = |rec: &str| {
+        vec![
+            "pipeline".to_string(),
+            "run".into(),
+            smoke.to_str().unwrap().into(),
+            "--store".into(),
+            store.to_str().unwrap().into(),
+            "--jobs".into(),
+            "1".into(),
+            "--recording".into(),
+            dir.join(rec).to_str().unwrap().into(),
+        ]
+    };
+    let inner = Command::new("unshare")
+        .args(["--pid", "--fork", "--mount-proc", env!("CARGO_BIN_EXE_idrex")])
+        .args(args("a.rrd"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let outer =
+        Command::new(env!("CARGO_BIN_EXE_idrex")).args(args("b.rrd")).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let (a, b) = (inner.wait_with_output().unwrap(), outer.wait_with_output().unwrap());
+    assert!(a.status.success() && b.status.success(), "{}{}", stderr(&a), stderr(&b));
+    assert_eq!(computed(&a) + computed(&b), artifact_dirs(&store).len(), "{}\n{}", stdout(&a), stdout(&b));
+    assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
+}

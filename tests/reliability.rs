@@ -182,3 +182,41 @@ fn mcap_demonstrations_from_another_environment_or_corrupt_are_refused() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!dir.join("s2").exists());
 }
+
+#[test]
+fn a_full_disk_fails_stages_cleanly_and_keeps_the_previous_recording() {
+    // A 1 MB tmpfs in a private mount namespace (root only; skipped elsewhere): the smoke
+    // store needs about 3 MB, so stages fail for lack of space part-way.
+    let probe = Command::new("unshare").args(["--mount", "sh", "-c", "mount -t tmpfs -o size=64k tmpfs /mnt"]).output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("skipped: cannot mount a tmpfs here");
+        return;
+    }
+    let dir = TempDir::new("diskfull");
+    let disk = dir.join("disk");
+    std::fs::create_dir_all(&disk).unwrap();
+    let script = format!(
+        r#"set -u
+d='{disk}'
+mount -t tmpfs -o size=1m tmpfs "$d"
+printf OLD > "$d/r.rrd"
+'{idrex}' pipeline run '{smoke}' --store "$d/store" --recording "$d/r.rrd" > "$d/../run.out" 2> "$d/../run.err"
+echo "run exit $?"
+echo "recording $(head -c 3 "$d/r.rrd")"
+'{idrex}' verify --store "$d/store" > /dev/null 2>&1; echo "verify exit $?"
+ls "$d/store/.tmp" | grep -v '\.lock$' | wc -l | sed 's/^/staging left /'
+"#,
+        disk = disk.display(),
+        idrex = env!("CARGO_BIN_EXE_idrex"),
+        smoke = repo("pipelines/smoke.yaml").display()
+    );
+    let out = Command::new("unshare").args(["--mount", "sh", "-c", &script]).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    let err = std::fs::read_to_string(dir.join("run.err")).unwrap_or_default();
+    assert!(text.contains("run exit 1"), "the run fails: {text}\n{err}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(err.contains("No space left on device"), "and says why: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(text.contains("recording OLD"), "the previous recording is intact: {text}");
+    assert!(text.contains("verify exit 0"), "nothing partial was published: {text}");
+    assert!(text.contains("staging left 0"), "failed stages left no staging behind: {text}");
+}

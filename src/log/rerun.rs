@@ -50,7 +50,10 @@ impl Recording {
         let _ = self.rec.log_static(entity, &rerun::TextDocument::new(text));
     }
 
+    /// Waits until everything is written. Rerun's file sink stops writing after an I/O error
+    /// (a full disk) and a blocking flush would then wait forever; a recording takes well
+    /// under a second to flush, so 30 s without progress is an error.
     pub fn finish(self, path: &Path) -> Result<()> {
-        self.rec.flush_blocking().map_err(|e| err(path, e))
+        self.rec.flush_with_timeout(std::time::Duration::from_secs(30)).map_err(|e| err(path, e))
     }
 }
