@@ -77,7 +77,7 @@ pub fn demos(p: &DemosParams, ctx: &StageCtx) -> Result<RolloutSummary> {
 pub struct ImportParams {
     pub env: EnvId,
     pub path: PathBuf,
-    /// The file's content, not its path, identifies the demonstrations in the key.
+    /// The file's content: a changed file changes the key even at the same path.
     pub sha256: String,
 }
 
