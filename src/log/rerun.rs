@@ -1,5 +1,6 @@
-//! Plots as Rerun recordings (`.rrd`, written with `RecordingStreamBuilder::save`), opened
-//! with `rerun FILE.rrd`. Entity paths are fixed: `degradation/<source>/…`,
+//! Plots as Rerun recordings (`.rrd`), opened with `rerun FILE.rrd`. The stream is recorded
+//! in memory and written by us: Rerun's own file sink stops on an I/O error (a full disk)
+//! and its flush then waits forever. Entity paths are fixed: `degradation/<source>/…`,
 //! `reward/<set>/…`, `ppo/<run>/…`, `trex/model<m>/…`.
 use std::path::Path;
 
@@ -7,6 +8,7 @@ use crate::error::{Error, Result};
 
 pub struct Recording {
     rec: rerun::RecordingStream,
+    storage: rerun::sink::MemorySinkStorage,
 }
 
 fn err(path: &Path, e: impl std::fmt::Display) -> Error {
@@ -15,8 +17,9 @@ fn err(path: &Path, e: impl std::fmt::Display) -> Error {
 
 impl Recording {
     pub fn create(path: &Path, name: &str) -> Result<Self> {
-        let rec = rerun::RecordingStreamBuilder::new("idrex").recording_name(name.to_string()).save(path).map_err(|e| err(path, e))?;
-        Ok(Recording { rec })
+        let (rec, storage) =
+            rerun::RecordingStreamBuilder::new("idrex").recording_name(name.to_string()).memory().map_err(|e| err(path, e))?;
+        Ok(Recording { rec, storage })
     }
 
     /// One point of a time series: `value` at `x` on `timeline`.
@@ -50,10 +53,10 @@ impl Recording {
         let _ = self.rec.log_static(entity, &rerun::TextDocument::new(text));
     }
 
-    /// Waits until everything is written. Rerun's file sink stops writing after an I/O error
-    /// (a full disk) and a blocking flush would then wait forever; a recording takes well
-    /// under a second to flush, so 30 s without progress is an error.
+    /// Encodes the recording and writes it to `path` (fsynced).
     pub fn finish(self, path: &Path) -> Result<()> {
-        self.rec.flush_with_timeout(std::time::Duration::from_secs(30)).map_err(|e| err(path, e))
+        let bytes = self.storage.drain_as_bytes().map_err(|e| err(path, e))?;
+        std::fs::write(path, bytes).map_err(|e| Error::io(path, e))?;
+        std::fs::File::open(path).and_then(|f| f.sync_all()).map_err(|e| Error::io(path, e))
     }
 }
