@@ -259,7 +259,7 @@ pub fn ppo_progress<'a>(ctx: &'a StageCtx<'a>, total: usize) -> impl FnMut(&crat
     move |p| {
         ctx.progress.set_position(p.global_step as u64);
         if let Some(r) = p.episodic_return {
-            ctx.progress.set_message(format!("return {r:.0}"));
+            ctx.progress.set_message(format!("true return {r:.0}"));
         }
     }
 }
