@@ -35,10 +35,6 @@ pub struct RewardConfig {
 }
 
 impl RewardConfig {
-    /// D-REX's MuJoCo reward: 2 x 256 ReLU on the observation, 3 models.
-    pub fn drex(obs_dim: usize) -> Self {
-        RewardConfig { obs_dim, act_dim: None, hidden: vec![256, 256], models: 3, clip: 100.0, init: WeightInit::TorchDefault }
-    }
     pub fn input_dim(&self) -> usize {
         self.obs_dim + self.act_dim.unwrap_or(0)
     }

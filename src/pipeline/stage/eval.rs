@@ -116,7 +116,6 @@ fn learned_score(model: &RewardEnsemble, reference: &[(f64, f64)], trajs: &[Traj
 pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     let mut env = Env::new(p.env)?;
     let policy_dir = ctx.input("policy")?;
-    let final_policy = load_policy_for(policy_dir, &env, p.env)?;
     let reward = match ctx.inputs.get("reward") {
         None => None,
         Some(dir) => {
@@ -150,7 +149,7 @@ pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     }
     let trajs = match last_trajs {
         Some(t) => t,
-        None => play(&final_policy),
+        None => play(&load_policy_for(policy_dir, &Env::new(p.env)?, p.env)?),
     };
     let (accuracy, learned) = match &reward {
         None => (None, None),
