@@ -13,7 +13,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::Method;
 use crate::pipeline::stage::eval::CheckpointEval;
 use crate::pipeline::stage::{Metrics, Params, Typed};
-use crate::stats::{ReturnStats, bootstrap_ci};
+use crate::stats::{ReturnStats, bootstrap_ci, spearman};
 use crate::store::Store;
 
 /// Which policy of each PPO run a figure is measured on.
@@ -168,10 +168,27 @@ struct Long {
     runs: BTreeMap<(String, String, String), Vec<RunEval>>,
 }
 
+/// How well the learned reward ranks one PPO run's own policies over training: Spearman
+/// correlation, over the checkpoints, of the ensemble-mean learned return with the true
+/// return (NaN without learned scores). Negative means PPO climbing the learned reward
+/// walked down the true one.
+pub fn over_checkpoints(checkpoints: &[CheckpointEval]) -> f64 {
+    let scored: Vec<(f64, f64)> = checkpoints
+        .iter()
+        .filter_map(|c| c.learned.map(|l| (l.mean, c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64)))
+        .collect();
+    if scored.len() < 2 || scored.len() != checkpoints.len() {
+        return f64::NAN;
+    }
+    let (learned, truth): (Vec<f64>, Vec<f64>) = scored.into_iter().unzip();
+    spearman(&learned, &truth)
+}
+
 fn collect(store: &Store) -> Result<Long> {
     let (mut env, mut method, mut pipeline, mut run, mut ret) = (vec![], vec![], vec![], vec![], vec![]);
     let (mut d_env, mut d_pipeline, mut d_ret) = (vec![], vec![], vec![]);
-    let (mut a_env, mut a_method, mut a_pearson, mut a_spearman, mut a_pairwise) = (vec![], vec![], vec![], vec![], vec![]);
+    let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
+    let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, String, String), Vec<RunEval>> = BTreeMap::new();
     for m in store.manifests()? {
@@ -202,10 +219,12 @@ fn collect(store: &Store) -> Result<Long> {
         });
         if let Some(acc) = &x.reward {
             a_env.push(e.clone());
+            a_pipeline.push(p.pipeline.clone());
             a_method.push(label.clone());
             a_spearman.push(acc.spearman);
             a_pearson.push(acc.pearson);
             a_pairwise.push(acc.pairwise_accuracy);
+            a_over_checkpoints.push(over_checkpoints(&x.checkpoints));
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
         if let Some(dk) = m.inputs.get("demos")
@@ -232,16 +251,18 @@ fn collect(store: &Store) -> Result<Long> {
         demos: df(vec![Column::new("env".into(), d_env), Column::new("pipeline".into(), d_pipeline), Column::new("return".into(), d_ret)])?,
         accuracy: df(vec![
             Column::new("env".into(), a_env),
+            Column::new("pipeline".into(), a_pipeline),
             Column::new("method".into(), a_method),
             Column::new("pearson".into(), a_pearson),
             Column::new("spearman".into(), a_spearman),
             Column::new("pairwise_accuracy".into(), a_pairwise),
+            Column::new("spearman_over_checkpoints".into(), a_over_checkpoints),
         ])?,
         runs,
     })
 }
 
-/// The tables: returns per (env, pipeline, method) and reward accuracy per (env, method).
+/// The tables: returns and reward accuracy per (env, pipeline, method).
 pub struct Tables {
     pub returns: DataFrame,
     /// One row per (env, pipeline, method, protocol).
@@ -296,9 +317,15 @@ pub fn build(store: &Store) -> Result<Tables> {
     let accuracy = long
         .accuracy
         .lazy()
-        .group_by([col("env"), col("method")])
-        .agg([col("pearson").mean(), col("spearman").mean(), col("pairwise_accuracy").mean(), col("spearman").count().alias("runs")])
-        .sort(["env", "method"], Default::default())
+        .group_by(keys.clone())
+        .agg([
+            col("pearson").mean(),
+            col("spearman").mean(),
+            col("pairwise_accuracy").mean(),
+            col("spearman_over_checkpoints").mean(),
+            col("spearman").count().alias("runs"),
+        ])
+        .sort(["env", "pipeline", "method"], Default::default())
         .collect()
         .map_err(pe)?;
     Ok(Tables { returns, protocols, runs, demos, accuracy })
@@ -372,16 +399,25 @@ pub fn markdown(t: &Tables) -> String {
         }
         out.push('\n');
     }
-    out.push_str("\n## Learned reward on unseen evaluation rollouts (mean over runs)\n\n| env | method | Pearson | Spearman | pairwise accuracy | runs |\n|---|---|---|---|---|---|\n");
+    out.push_str(concat!(
+        "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
+        "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
+        "Over checkpoints: Spearman correlation of learned and true return across each PPO run's checkpoints ",
+        "(does climbing the learned reward climb the true one?).\n\n",
+        "| env | pipeline | method | Pearson | Spearman | pairwise accuracy | Spearman over checkpoints | runs |\n",
+        "|---|---|---|---|---|---|---|---|\n"
+    ));
     for i in 0..t.accuracy.height() {
         let g = |c: &str| cell_f(&t.accuracy, c, i).filter(|v| v.is_finite()).map_or("n/a".into(), |v| format!("{v:.3}"));
         out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
             cell_s(&t.accuracy, "env", i),
+            cell_s(&t.accuracy, "pipeline", i),
             cell_s(&t.accuracy, "method", i),
             g("pearson"),
             g("spearman"),
             g("pairwise_accuracy"),
+            g("spearman_over_checkpoints"),
             cell_f(&t.accuracy, "runs", i).unwrap_or(0.0)
         ));
     }

@@ -54,7 +54,7 @@ impl Graph {
         let mut keys: BTreeMap<String, String> = BTreeMap::new();
         for n in &self.nodes {
             let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
-            let k = store::key(n.kind().name(), n.kind().version(), &n.params.to_json(), n.seed, &inputs);
+            let k = store::key(n.kind().name(), n.kind().version(), &n.params.key_json(), n.seed, &inputs);
             keys.insert(n.name.clone(), k);
         }
         keys
@@ -267,5 +267,45 @@ mod tests {
         // multi-BC's clones) and everything after.
         assert_eq!(changed("trex:\n  init: normal-0.02\n"), descendants(&[StageKind::Trex]));
         assert_eq!(changed("bc:\n  init: normal-0.02\n"), descendants(&[StageKind::Bc, StageKind::MultiBcRollouts]));
+    }
+
+    /// An imported demonstration file is identified by its content, not where it lies: a
+    /// copy elsewhere keeps every key, a changed file changes them all.
+    #[test]
+    fn imported_demonstrations_are_keyed_by_content_not_path() {
+        use crate::data::{TrajMeta, Trajectory};
+        use crate::env::RewardTerms;
+        let dir = std::env::temp_dir().join(format!("idrex-import-key-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("moved")).unwrap();
+        // A short valid Hopper episode (11-dim observations, 3-dim actions).
+        let write = |path: &std::path::Path, seed: u64| {
+            let len = 3;
+            let t = Trajectory {
+                obs_dim: 11,
+                act_dim: 3,
+                obs: (0..(len + 1) * 11).map(|i| i as f32 * 0.01).collect(),
+                actions: vec![0.1; len * 3],
+                rewards: vec![1.0; len],
+                terms: vec![RewardTerms { reward_forward: 0.5, reward_ctrl: -0.1, reward_survive: 0.6 }; len],
+                terminated: false,
+                truncated: true,
+                meta: TrajMeta { source: "demo".into(), noise: 0.0, seed, group: 0 },
+            };
+            crate::log::mcap::write(path, "Hopper-v5", 0.008, &[t], None).unwrap();
+        };
+        let npz = dir.join("demos.mcap");
+        write(&npz, 0);
+        let keys = |file: &std::path::Path| {
+            let text = format!("{BASE}demos:\n  from: {}\n", file.display());
+            expand(&Pipeline::parse(&dir.join("p.yaml"), &text).unwrap()).unwrap().keys()
+        };
+        let here = keys(&npz);
+        let moved = dir.join("moved/other-name.mcap");
+        std::fs::copy(&npz, &moved).unwrap();
+        assert_eq!(keys(&moved), here);
+        write(&moved, 1);
+        let changed = keys(&moved);
+        assert!(here.keys().all(|n| changed[n] != here[n]), "every node descends from the demonstrations");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

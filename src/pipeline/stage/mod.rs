@@ -124,6 +124,19 @@ stage_kinds! {
     TestValue = "test-value": test_value::Params => test_value::Metrics, test_value::run;
 }
 
+impl Params {
+    /// What identifies the computation, for the key: the parameters, less the path an
+    /// imported file was read from (its content's digest is in them), so that a moved file,
+    /// another checkout or another machine of a shared store finds the same artifacts. The
+    /// manifest keeps the path ([`Params::to_json`]) as provenance.
+    pub fn key_json(&self) -> Value {
+        match self {
+            Params::DemosImport(p) => serde_json::json!({ "env": p.env, "sha256": p.sha256 }),
+            _ => self.to_json(),
+        }
+    }
+}
+
 fn parse<T: serde::de::DeserializeOwned>(kind: StageKind, what: &str, v: &Value) -> Result<T> {
     T::deserialize(v).map_err(|e| Error::Invalid(format!("stored {} {what} do not match this idrex version: {e}", kind.name())))
 }
