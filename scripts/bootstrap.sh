@@ -10,6 +10,10 @@
 #    cargo target directory under the cache. Absolute and clone-independent on purpose: every
 #    clone on the machine then shares one incremental build instead of rebuilding libtorch's
 #    bindings because a path changed.
+#  - the npm packages of analysis/foxglove (the TypeScript MCAP reader Foxglove is built on,
+#    which the tests read our files with) under $cache/node-<hash of package-lock.json>,
+#    linked as analysis/foxglove/node_modules, with the machine's Node.js. Separate from the Python
+#    environment, so changing one never reinstalls (or rebuilds against) the other.
 # An environment is trusted only when its `.complete` marker exists; the marker is written
 # last, so an interrupted or failed install is removed and redone by the next run.
 set -euo pipefail
@@ -46,15 +50,37 @@ CFG
   if cmp -s "$tmp" "$cfg"; then rm -f "$tmp"; else mv -f "$tmp" "$cfg"; fi
 }
 
+node_deps() {
+  command -v npm >/dev/null || die "no 'npm' on PATH; the tests read MCAP files with Node.js (Debian: apt install nodejs npm)"
+  local lock="$repo/analysis/foxglove/package-lock.json" dir
+  dir="$cache/node-$(sha256sum "$lock" | cut -c1-12)"
+  mkdir -p "$cache"
+  exec 8>"$cache/node.lock"
+  flock 8
+  if [ ! -f "$dir/.complete" ]; then
+    echo "bootstrap: npm ci (analysis/foxglove) into $dir" >&2
+    rm -rf "$dir" && mkdir -p "$dir"
+    cp "$repo/analysis/foxglove/package.json" "$lock" "$dir/"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error >"$dir.install.log" 2>&1 8>&- 9>&-) \
+      || { rm -rf "$dir"; die "npm ci failed for analysis/foxglove (see $dir.install.log)"; }
+    touch "$dir/.complete"
+  fi
+  exec 8>&-
+  ln -sfn "$dir/node_modules" "$repo/analysis/foxglove/node_modules"
+}
+
 if [ -f "$env_dir/.complete" ]; then
+  node_deps
   link_clone
   exit 0
 fi
 
 mkdir -p "$cache"
+
 exec 9>"$cache/bootstrap.lock"
 flock -n 9 || { echo "bootstrap: waiting for another set-up ($cache/bootstrap.lock)" >&2; flock 9; }
 if [ -f "$env_dir/.complete" ]; then  # another process finished it while we waited
+  node_deps
   link_clone
   exit 0
 fi
@@ -92,5 +118,6 @@ assets="$site/gymnasium/envs/mujoco/assets"
 ln -sfn "$assets" "$env_dir/mujoco-assets"
 
 touch "$env_dir/.complete"
+node_deps
 link_clone
 echo "bootstrap: ready ($env_dir)" >&2

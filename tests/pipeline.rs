@@ -76,6 +76,12 @@ print("ok", len(sys.argv) - 1)
 "#;
     let args: Vec<&str> = mcaps.iter().map(|p| p.to_str().unwrap()).collect();
     assert!(py(check, &args).starts_with("ok"));
+    // And in the TypeScript reader Foxglove is built on, every channel decoding under
+    // Foxglove's JSON-schema rules (one type per field): the /step channel included.
+    let ts = Command::new("node").arg(repo("analysis/foxglove/check.mjs")).args(&args).output().unwrap();
+    assert!(ts.status.success(), "foxglove check: {}{}", stdout(&ts), stderr(&ts));
+    let steps = stdout(&ts).lines().filter(|l| l.contains("\"/step\":") && !l.contains("\"/step\":0")).count();
+    assert!(steps >= 10, "files whose /step messages decode: {}", stdout(&ts));
 
     // The report: CSV that Python's csv module reads, markdown with every method.
     let out_dir = dir.join("report");

@@ -6,7 +6,9 @@
 //!   seed, group and the first observation s_0.
 //! - `/step`: one message per step: episode, t, the observation s_t the action was taken
 //!   in, the action, the next observation s_{t+1}, the environment reward and its terms, the
-//!   learned reward where there is one, and the terminated/truncated flags.
+//!   learned reward where there is one (the field is absent otherwise), and the
+//!   terminated/truncated flags. Every schema field has exactly one JSON type, as Foxglove's
+//!   JSON-schema parser requires.
 //! - log_time is simulated time in nanoseconds, monotonic over the whole file (episodes
 //!   follow each other), publish_time equals it.
 //! - metadata `idrex.rollout` (env, dimensions, dt, format) and `idrex.episodes` (one
@@ -24,7 +26,7 @@ use crate::error::{Error, Result};
 pub const FORMAT: &str = "idrex-rollout/1";
 
 const EPISODE_SCHEMA: &str = r#"{"type":"object","title":"idrex.Episode","properties":{"episode":{"type":"integer"},"source":{"type":"string"},"noise":{"type":"number"},"seed":{"type":"integer"},"group":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}}},"required":["episode","source","noise","seed","group","obs"]}"#;
-const STEP_SCHEMA: &str = r#"{"type":"object","title":"idrex.Step","properties":{"episode":{"type":"integer"},"t":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}},"action":{"type":"array","items":{"type":"number"}},"next_obs":{"type":"array","items":{"type":"number"}},"reward":{"type":"number"},"reward_forward":{"type":"number"},"reward_ctrl":{"type":"number"},"reward_survive":{"type":"number"},"learned_reward":{"type":["number","null"]},"terminated":{"type":"boolean"},"truncated":{"type":"boolean"}},"required":["episode","t","obs","action","next_obs","reward","terminated","truncated"]}"#;
+const STEP_SCHEMA: &str = r#"{"type":"object","title":"idrex.Step","properties":{"episode":{"type":"integer"},"t":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}},"action":{"type":"array","items":{"type":"number"}},"next_obs":{"type":"array","items":{"type":"number"}},"reward":{"type":"number"},"reward_forward":{"type":"number"},"reward_ctrl":{"type":"number"},"reward_survive":{"type":"number"},"learned_reward":{"type":"number"},"terminated":{"type":"boolean"},"truncated":{"type":"boolean"}},"required":["episode","t","obs","action","next_obs","reward","terminated","truncated"]}"#;
 
 /// Per-step learned rewards, one vector per trajectory, where a reward model scored them.
 pub type LearnedRewards<'a> = Option<&'a [Vec<f64>]>;
@@ -66,12 +68,16 @@ fn write_to<W: Write + Seek>(
             seq += 1;
             let last = s + 1 == t.len();
             let terms = t.terms.get(s).copied().unwrap_or_default();
-            let msg = json!({
+            let mut msg = json!({
                 "episode": e, "t": s, "obs": t.obs_row(s), "action": t.action_row(s), "next_obs": t.obs_row(s + 1),
                 "reward": t.rewards[s], "reward_forward": terms.reward_forward, "reward_ctrl": terms.reward_ctrl,
-                "reward_survive": terms.reward_survive, "learned_reward": learned.map(|l| l[e][s]),
+                "reward_survive": terms.reward_survive,
                 "terminated": last && t.terminated, "truncated": last && t.truncated,
             });
+            // Absent rather than null: Foxglove's JSON-schema parser takes one type per field.
+            if let Some(l) = learned {
+                msg["learned_reward"] = json!(l[e][s]);
+            }
             out.write_to_known_channel(
                 &mcap::records::MessageHeader { channel_id: step_chan, sequence: seq, log_time: clock, publish_time: clock },
                 msg.to_string().as_bytes(),

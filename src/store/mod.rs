@@ -59,9 +59,10 @@ pub struct Manifest {
 pub fn key(kind: &str, version: u32, params: &serde_json::Value, seed: u64, inputs: &BTreeMap<String, String>) -> String {
     // serde_json's Map is a BTreeMap (no preserve_order feature): keys serialise sorted.
     // key_format 2: parameters became typed structs (some gained fields, the PPO curve
-    // changed columns), so every key changed once.
+    // changed columns), so every key changed once. key_format 3: rollout MCAP files omit an
+    // absent learned reward instead of writing null, so their bytes changed.
     let canonical = serde_json::json!({
-        "key_format": 2, "kind": kind, "version": version, "params": params, "seed": seed, "inputs": inputs,
+        "key_format": 3, "kind": kind, "version": version, "params": params, "seed": seed, "inputs": inputs,
     });
     hex(&Sha256::digest(canonical.to_string().as_bytes()))
 }
