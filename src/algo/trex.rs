@@ -54,7 +54,10 @@ impl Default for TrexConfig {
             l2: 0.01,
             val_fraction: 0.2,
             action_input: false,
-            init: WeightInit::TorchDefault,
+            // The original code's N(0, 0.02^2): with libtorch's default init, no setting of
+            // PPO's reward composition kept the learned reward's gains on HalfCheetah
+            // (analysis/results/ablation.md).
+            init: WeightInit::Normal002,
         }
     }
 }

@@ -103,7 +103,7 @@ pub struct RewardSettings {
     pub ctrl_coeff: Option<f64>,
     /// mean, or last-over-count (the original code).
     pub combine: Combine,
-    /// clipped, or raw (the original code).
+    /// raw (the original code; the default), or clipped.
     pub ctrl_action: CtrlAction,
 }
 

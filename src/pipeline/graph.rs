@@ -255,17 +255,17 @@ mod tests {
         };
         // The reward's composition: the PPO runs (on learned rewards) and what follows them,
         // never the reward models themselves or anything before.
-        for extra in ["reward:\n  combine: last-over-count\n", "reward:\n  ctrl_action: raw\n", "reward:\n  ctrl_coeff: 0.5\n"] {
+        for extra in ["reward:\n  combine: last-over-count\n", "reward:\n  ctrl_action: clipped\n", "reward:\n  ctrl_coeff: 0.5\n"] {
             assert_eq!(changed(extra), descendants(&[StageKind::Ppo]), "{extra}");
         }
         // The truncation bootstrap and the checkpoint interval: every PPO run, the
         // demonstrator's included.
-        for extra in ["ppo:\n  bootstrap_truncation: false\n", "ppo:\n  checkpoint_every: 5\n"] {
+        for extra in ["ppo:\n  bootstrap_truncation: true\n", "ppo:\n  checkpoint_every: 5\n"] {
             assert_eq!(changed(extra), descendants(&[StageKind::Demonstrator, StageKind::Ppo]), "{extra}");
         }
         // Initialisation: the reward networks (T-REX and everything after), and BC (with
         // multi-BC's clones) and everything after.
-        assert_eq!(changed("trex:\n  init: normal-0.02\n"), descendants(&[StageKind::Trex]));
+        assert_eq!(changed("trex:\n  init: default\n"), descendants(&[StageKind::Trex]));
         assert_eq!(changed("bc:\n  init: normal-0.02\n"), descendants(&[StageKind::Bc, StageKind::MultiBcRollouts]));
     }
 

@@ -67,8 +67,9 @@ pub struct PpoConfig {
     /// Keep a checkpoint of the policy after the first update and every this many updates
     /// (0: none), as the original D-REX code (baselines' ppo2) did before evaluating each.
     pub checkpoint_every: usize,
-    /// Bootstrap episodes cut by the time limit with gamma V(s_final) (SB3); false treats the
-    /// limit as termination (CleanRL, and the original code's baselines PPO2).
+    /// Bootstrap episodes cut by the time limit with gamma V(s_final) (SB3); false (the
+    /// default) treats the limit as termination (CleanRL, and the original code's baselines
+    /// PPO2). On learned rewards the bootstrap did worse (analysis/results/ablation.md).
     pub bootstrap_truncation: bool,
 }
 
@@ -106,7 +107,7 @@ impl Default for PpoConfig {
             eval_episodes: 5,
             backend: Backend::Fused,
             checkpoint_every: 20,
-            bootstrap_truncation: true,
+            bootstrap_truncation: false,
         }
     }
 }
