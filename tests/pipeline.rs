@@ -90,6 +90,24 @@ print("ok", len(sys.argv) - 1)
     let md = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
     assert!(md.contains("| Hopper-v5 | smoke |"), "{md}");
     assert!(!md.contains("missing"), "every method has results: {md}");
+    // The figures: SVG and PNG of each kind, linked from report.md; every PNG decodes at its
+    // size and is not blank (many colours, a good share of non-white pixels).
+    let figures = out_dir.join("figures");
+    for kind in ["degradation", "reward-drex", "reward-idrex-multi-bc", "ppo", "final"] {
+        let stem = format!("hopper-v5-smoke-{kind}");
+        assert!(md.contains(&format!("figures/{stem}.png")), "{stem} linked: {md}");
+        let svg = std::fs::read_to_string(figures.join(format!("{stem}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("true return"), "{stem}.svg has labelled axes");
+        let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(figures.join(format!("{stem}.png"))).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut pixels).unwrap();
+        assert_eq!((info.width, info.height), (960, 640), "{stem}");
+        let rgb: Vec<[u8; 3]> = pixels[..info.buffer_size()].chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let colours: std::collections::HashSet<[u8; 3]> = rgb.iter().copied().collect();
+        let inked = rgb.iter().filter(|p| **p != [255, 255, 255]).count() as f64 / rgb.len() as f64;
+        assert!(colours.len() > 20 && inked > 0.02, "{stem}.png looks blank: {} colours, {:.1} % inked", colours.len(), inked * 100.0);
+    }
     let csv_check = r#"
 import csv, sys
 rows = list(csv.DictReader(open(sys.argv[1])))

@@ -33,6 +33,17 @@ impl Method {
             Method::IdrexMultiBc => "idrex-multi-bc",
         }
     }
+
+    /// The paper's column heading.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Bc => "BC",
+            Method::Drex => "D-REX",
+            Method::IdrexInterpolation => "iD-REX interp.",
+            Method::IdrexActionNoise => "iD-REX action noise",
+            Method::IdrexMultiBc => "iD-REX multi-BC",
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

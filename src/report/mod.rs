@@ -7,6 +7,8 @@
 //! bootstrap confidence interval over runs.
 use std::collections::BTreeMap;
 
+pub mod figures;
+
 use polars::prelude::*;
 
 use crate::error::{Error, Result};
