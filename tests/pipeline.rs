@@ -50,6 +50,28 @@ fn smoke_pipeline_end_to_end() {
     let rerun = Path::new(&python()).with_file_name("rerun");
     let v = Command::new(&rerun).args(["rrd", "verify", rec.to_str().unwrap()]).output().unwrap();
     assert!(v.status.success(), "rerun rrd verify: {}{}", stdout(&v), stderr(&v));
+    // It carries its layout (a blueprint: a viewport with automatic views off and one view
+    // per figure), and every plotted row has the one plot timeline, `x`, and no other.
+    let p = Command::new(&rerun).args(["rrd", "print", "-vv", rec.to_str().unwrap()]).output().unwrap();
+    assert!(p.status.success(), "rerun rrd print: {}", stderr(&p));
+    let printed = stdout(&p);
+    let (mut entity, mut views, mut timelines) = (String::new(), std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
+    let blueprint = |e: &str| ["/view/", "/container/", "/viewport", "/time_panel", "/blueprint_panel", "/selection_panel"].iter().any(|p| e.starts_with(p));
+    for line in printed.lines() {
+        if let Some(rest) = line.strip_prefix("Chunk(") {
+            entity = rest.split(" - ").nth(1).unwrap_or_default().trim().to_string();
+            if entity.starts_with("/view/") && !entity.contains("/ViewContents") {
+                views.insert(entity.clone());
+            }
+        } else if let Some(i) = line.find("index_name: ")
+            && !blueprint(&entity)
+        {
+            timelines.insert(line[i + 12..].split_whitespace().next().unwrap_or_default().to_string());
+        }
+    }
+    assert!(printed.contains("ViewportBlueprint:auto_views"), "the recording has no blueprint");
+    assert_eq!(views.len(), 7, "one view per figure: {views:?}");
+    assert_eq!(timelines.into_iter().collect::<Vec<_>>(), vec!["x".to_string()], "plotted rows carry only the plot timeline");
 
     // Every rollout file opens in Python's mcap reader with monotonic log times.
     let mcaps: Vec<_> = walk(&store).into_iter().filter(|p| p.extension().is_some_and(|e| e == "mcap")).collect();

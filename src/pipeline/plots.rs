@@ -11,15 +11,11 @@ use super::runner::{Outcome, Status};
 use super::stage::eval::EvalMetrics;
 use super::stage::{DegradationLevel, Metrics};
 use crate::error::{Error, Result};
-use crate::log::rerun::Recording;
+use crate::log::rerun::{Panel, Recording, Style};
 use crate::store::Store;
 
 fn entity(node: &str) -> String {
     node.replace('/', "_")
-}
-
-fn xy(truth: &[f64], predicted: &[f64]) -> Vec<(f32, f32)> {
-    truth.iter().zip(predicted).map(|(&t, &p)| (t as f32, p as f32)).collect()
 }
 
 fn status_name(s: &Status) -> &'static str {
@@ -47,20 +43,23 @@ fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Optio
     for (prefix, runs) in groups {
         let chosen = crate::report::select(&runs.iter().map(|(_, x)| x.checkpoints.as_slice()).collect::<Vec<_>>());
         for (run, x) in &runs {
-            let e = format!("checkpoints/{}/run{run}", entity(prefix));
+            let e = format!("{}/run{run}", entity(prefix));
+            let (true_e, learned_e) = (format!("checkpoints_true/{e}"), format!("checkpoints_learned/{e}"));
+            rec.series(&true_e, &format!("{prefix} run {run}"), Style::Line);
+            rec.series(&learned_e, &format!("{prefix} run {run}"), Style::Line);
             for c in &x.checkpoints {
                 let mean = c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64;
-                rec.scalar(&format!("{e}/true_return"), "env_step", c.step as i64, mean);
+                rec.scalar(&true_e, c.step as i64, mean);
                 if let Some(l) = c.learned {
-                    rec.scalar(&format!("{e}/learned_return"), "env_step", c.step as i64, l.mean);
+                    rec.scalar(&learned_e, c.step as i64, l.mean);
                 }
                 let marks = [
-                    (chosen.by_ground_truth, "selected_by_ground_truth", "best checkpoint (chosen with the true reward)"),
-                    (chosen.without_ground_truth, "selected_without_ground_truth", "chosen without the true reward"),
+                    (chosen.by_ground_truth, "best", "best checkpoint (chosen with the true reward)"),
+                    (chosen.without_ground_truth, "chosen_without_truth", "chosen without the true reward"),
                 ];
                 for (step, name, label) in marks {
                     if step == Some(c.step) {
-                        rec.marker(&format!("{e}/{name}"), "env_step", c.step as i64, mean, label);
+                        rec.marker(&format!("{true_e}_{name}"), c.step as i64, mean, &format!("{prefix} run {run}: {label}"));
                     }
                 }
             }
@@ -97,48 +96,69 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         Some(Metrics::Demos(s) | Metrics::DemosImport(s)) => Some((s.stats.mean, s.stats.std)),
         _ => None,
     };
-    let degradation_curve = |e: &str, levels: &[DegradationLevel]| {
+    if let Some((dm, ds)) = demos {
+        for (leaf, value, name, style) in [
+            ("mean", dm, "demonstrations: mean", Style::Line),
+            ("plus_std", dm + ds, "demonstrations: + std", Style::ThinLine),
+            ("minus_std", dm - ds, "demonstrations: - std", Style::ThinLine),
+        ] {
+            let e = format!("degradation/demonstrations/{leaf}");
+            rec.series(&e, name, style);
+            rec.scalar(&e, 0, value);
+            rec.scalar(&e, 1000, value);
+        }
+    }
+    let degradation_curve = |node: &str, levels: &[DegradationLevel]| {
+        let e = entity(node);
+        for (leaf, name, style) in [("mean", "mean", Style::Line), ("plus_std", "+ std", Style::ThinLine), ("minus_std", "- std", Style::ThinLine)]
+        {
+            rec.series(&format!("degradation/{e}/{leaf}"), &format!("{node}: {name}"), style);
+        }
         for l in levels {
             let t = (l.noise * 1000.0).round() as i64;
-            rec.scalar(&format!("degradation/{e}/mean"), "noise_permille", t, l.mean);
-            rec.scalar(&format!("degradation/{e}/mean_plus_std"), "noise_permille", t, l.mean + l.std);
-            rec.scalar(&format!("degradation/{e}/mean_minus_std"), "noise_permille", t, l.mean - l.std);
-            if let Some((dm, ds)) = demos {
-                rec.scalar(&format!("degradation/{e}/demos_mean"), "noise_permille", t, dm);
-                rec.scalar(&format!("degradation/{e}/demos_mean_plus_std"), "noise_permille", t, dm + ds);
-                rec.scalar(&format!("degradation/{e}/demos_mean_minus_std"), "noise_permille", t, dm - ds);
-            }
+            rec.scalar(&format!("degradation/{e}/mean"), t, l.mean);
+            rec.scalar(&format!("degradation/{e}/plus_std"), t, l.mean + l.std);
+            rec.scalar(&format!("degradation/{e}/minus_std"), t, l.mean - l.std);
         }
     };
-    let mut unseen: BTreeMap<String, Vec<(f32, f32)>> = BTreeMap::new();
-    let mut lines = vec![format!("# {name}\n\nnode | kind | status\n---|---|---")];
+    // Predicted against true return as a point series over the true return.
+    let scatter = |e: &str, name: &str, truth: &[f64], predicted: &[f64]| {
+        let r = crate::stats::pearson(truth, predicted);
+        let name = if r.is_finite() { format!("{name} (Pearson {r:.2})") } else { name.to_string() };
+        rec.series(e, &name, Style::Points);
+        for (&t, &p) in truth.iter().zip(predicted) {
+            rec.scalar(e, t.round() as i64, p);
+        }
+    };
+    let mut unseen: BTreeMap<String, (String, Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    let mut lines = vec![format!("# {name}\n\n| node | kind | status |\n|---|---|---|")];
     for n in &g.nodes {
         let status = outcomes.iter().find(|o| o.node == n.name).map_or("-", |o| status_name(&o.status));
-        lines.push(format!("{} | {} | {status}", n.name, n.kind().name()));
+        lines.push(format!("| {} | {} | {status} |", n.name, n.kind().name()));
         let Some(m) = metrics(&n.name) else { continue };
         let e = entity(&n.name);
         match &m {
-            Metrics::NoiseRollouts(x) => degradation_curve(&e, &x.degradation),
-            Metrics::InterpolationRollouts(x) | Metrics::ActionNoiseRollouts(x) => degradation_curve(&e, &x.degradation),
-            Metrics::MultiBcRollouts(x) => degradation_curve(&e, &x.degradation),
+            Metrics::NoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
+            Metrics::InterpolationRollouts(x) | Metrics::ActionNoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
+            Metrics::MultiBcRollouts(x) => degradation_curve(&n.name, &x.degradation),
             Metrics::Trex(t) => {
-                rec.points(&format!("reward/{e}/train_set"), &xy(&t.train_set.scored.truth, &t.train_set.scored.predicted), 2.0);
-                rec.points(&format!("reward/{e}/demos"), &xy(&t.demos.truth, &t.demos.predicted), 2.0);
+                let set = &t.train_set.scored;
+                scatter(&format!("reward/{e}/training_set"), &format!("{}: training set", n.name), &set.truth, &set.predicted);
+                scatter(&format!("reward/{e}/demonstrations"), &format!("{}: demonstrations", n.name), &t.demos.truth, &t.demos.predicted);
                 for (i, model) in t.models.iter().enumerate() {
+                    let loss = format!("trex_loss/{e}/model{i}");
+                    rec.series(&loss, &format!("{} model {i}", n.name), Style::ThinLine);
                     for p in &model.curve {
-                        let it = p.iteration as i64;
-                        rec.scalar(&format!("trex/{e}/model{i}/loss"), "trex_iteration", it, p.loss);
-                        rec.scalar(&format!("trex/{e}/model{i}/batch_accuracy"), "trex_iteration", it, p.batch_accuracy);
+                        rec.scalar(&loss, p.iteration as i64, p.loss);
                     }
                 }
             }
             Metrics::Ppo(x) => {
+                let e = format!("ppo_true/{e}");
+                rec.series(&e, &n.name, Style::ThinLine);
                 for p in &x.curve {
                     if let Some(r) = p.true_return {
-                        rec.scalar(&format!("ppo/{e}/true_return"), "env_step", p.step as i64, r);
-                    }
-                    if let Some(r) = p.learned_return {
-                        rec.scalar(&format!("ppo/{e}/learned_return"), "env_step", p.step as i64, r);
+                        rec.scalar(&e, p.step as i64, r);
                     }
                 }
             }
@@ -147,16 +167,31 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
                 if let Some(acc) = &x.reward
                     && let Some((_, src)) = n.inputs.iter().find(|(role, _)| role == "reward")
                 {
-                    unseen.entry(entity(src)).or_default().extend(xy(&x.summary.returns, &acc.predicted_returns));
+                    let entry = unseen.entry(entity(src)).or_insert_with(|| (src.clone(), vec![], vec![]));
+                    entry.1.extend(&x.summary.returns);
+                    entry.2.extend(&acc.predicted_returns);
                 }
             }
             Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) | Metrics::TestValue(_) => {}
         }
     }
-    for (e, xy) in unseen {
-        rec.points(&format!("reward/{e}/unseen"), &xy, 2.0);
+    for (e, (src, truth, predicted)) in unseen {
+        scatter(&format!("reward/{e}/unseen"), &format!("{src}: unseen evaluation rollouts"), &truth, &predicted);
     }
     checkpoint_curves(&rec, g, &metrics);
-    rec.text("pipeline", &lines.join("\n"));
+    rec.markdown("pipeline", &lines.join("\n"));
+    let plot = |title: &str, root: &str| Panel::Plot { title: title.into(), contents: vec![format!("+ /{root}/**")] };
+    rec.layout(
+        path,
+        vec![
+            plot("Return against noise level (x: noise level in ‰)", "degradation"),
+            plot("Learned against true return (x: true return; y: predicted return)", "reward"),
+            plot("PPO checkpoints: true return (x: environment step; ◆ chosen checkpoints)", "checkpoints_true"),
+            plot("PPO checkpoints: learned return, ensemble mean (x: environment step)", "checkpoints_learned"),
+            plot("PPO training episodes: true return (x: environment step)", "ppo_true"),
+            plot("T-REX loss (x: iteration)", "trex_loss"),
+            Panel::Text { title: "Pipeline stages".into(), entity: "pipeline".into() },
+        ],
+    )?;
     rec.finish(path)
 }
