@@ -235,8 +235,24 @@ print("ok")
     let csv_out = dir.join("steps.csv");
     let e = idrex(&["logs", "export", file.to_str().unwrap(), "--format", "csv", "--out", csv_out.to_str().unwrap()]);
     assert!(e.status.success(), "{}", stderr(&e));
-    let n = py("import csv,sys; print(len(list(csv.DictReader(open(sys.argv[1])))))", &[csv_out.to_str().unwrap()]);
+    let n = py(
+        "import csv,sys; rows = list(csv.DictReader(open(sys.argv[1]))); assert 'next_obs_0' in rows[0]; print(len(rows))",
+        &[csv_out.to_str().unwrap()],
+    );
     assert!(n.trim().parse::<usize>().unwrap() > 0);
+    // Another kind of file is called that, not corrupt, and nobody is told to delete it.
+    let manifest = file.with_file_name("manifest.json");
+    let l = idrex(&["logs", "list", manifest.to_str().unwrap()]);
+    assert!(!l.status.success() && stderr(&l).contains("is not an MCAP file") && !stderr(&l).contains("delete"), "{}", stderr(&l));
+    // Read-only commands create nothing: no store where there was none.
+    let nowhere = dir.join("no-store");
+    for args in [vec!["report", "--store", nowhere.to_str().unwrap()], vec!["verify", "--store", nowhere.to_str().unwrap()]] {
+        let o = idrex(&args);
+        assert!(!o.status.success() && stderr(&o).contains("no store at"), "{args:?}: {}", stderr(&o));
+    }
+    let plan = idrex(&["pipeline", "plan", repo("pipelines/smoke.yaml").to_str().unwrap(), "--store", nowhere.to_str().unwrap()]);
+    assert!(plan.status.success() && stdout(&plan).contains("missing"), "{}", stderr(&plan));
+    assert!(!nowhere.exists(), "a read-only command created {}", nowhere.display());
 }
 
 fn walk(dir: &Path) -> Vec<std::path::PathBuf> {

@@ -50,16 +50,26 @@ pub fn run(cmd: &PipelineCommand) -> anyhow::Result<()> {
     }
 }
 
+/// Whether a command writes to the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreAccess {
+    Read,
+    Write,
+}
+
 /// The pipeline file and the store it names (or `store` overrides).
-pub fn load(file: &Path, store: Option<&Path>) -> anyhow::Result<(Pipeline, Store)> {
+pub fn load(file: &Path, store: Option<&Path>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
     let p = Pipeline::load(file).map_err(|e| anyhow::anyhow!("{e}"))?;
     let root = store.map_or_else(|| p.store.clone(), Path::to_path_buf);
-    let store = Store::open(&root).with_context(|| format!("cannot open the store {}", root.display()))?;
+    let store = match access {
+        StoreAccess::Read => Store::at(&root),
+        StoreAccess::Write => Store::open(&root).with_context(|| format!("cannot open the store {}", root.display()))?,
+    };
     Ok((p, store))
 }
 
 fn plan(args: &PlanArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref())?;
+    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
     let g = expand(&p)?;
     let stored = |k: &str| store.check(k).is_ok();
     print!("{}", graph::render(&g, &g.keys(), &stored, args.format));
@@ -67,7 +77,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
 }
 
 fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref())?;
+    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Write)?;
     let g = expand(&p)?;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true };
@@ -93,6 +103,13 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     }
     plots::record(&g, &outcomes, &store, &rec, &p.name)?;
     println!("recording: {}", rec.display());
+    if failed.is_empty() {
+        println!(
+            "next: `idrex report --store {}` (tables and figures in report/), `rerun {}` (the plots)",
+            store.root().display(),
+            rec.display()
+        );
+    }
     if !failed.is_empty() {
         // One line per failed stage: its cause, its log, and how much it held up.
         for o in &outcomes {

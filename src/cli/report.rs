@@ -24,7 +24,10 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    let store = Store::open(&args.store)?;
+    if !args.store.is_dir() {
+        bail!("no store at {}; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store", args.store.display());
+    }
+    let store = Store::at(&args.store);
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store.display());

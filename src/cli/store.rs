@@ -29,7 +29,11 @@ pub struct GcArgs {
 }
 
 pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
-    let store = Store::open(&args.store)?;
+    if !args.store.is_dir() {
+        bail!("no store at {}; give its directory with --store", args.store.display());
+    }
+    // Recomputing stages into the store's .tmp; only checking writes nothing.
+    let store = if args.recompute.is_some() { Store::open(&args.store)? } else { Store::at(&args.store) };
     let keys = store.keys()?;
     let bad = store.verify()?;
     for (k, problem) in &bad {
@@ -67,20 +71,32 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
     if args.files.is_empty() {
         bail!("name the pipeline files whose artifacts to keep, e.g. `idrex gc pipelines/*.yaml`");
     }
+    if !args.store.is_dir() {
+        bail!("no store at {}; give its directory with --store", args.store.display());
+    }
     let store = Store::open(&args.store)?;
     let mut keep = std::collections::BTreeSet::new();
     for f in &args.files {
-        let (p, _) = super::pipeline::load(f, Some(&args.store))?;
+        let (p, _) = super::pipeline::load(f, Some(&args.store), super::pipeline::StoreAccess::Read)?;
         keep.extend(crate::pipeline::expand(&p)?.keys().into_values());
     }
+    // What each doomed artifact is, read before it goes.
+    let described: std::collections::BTreeMap<String, String> = store
+        .manifests()?
+        .into_iter()
+        .map(|m| (m.key.clone(), format!("{} ({}, {:.0} s to compute)", m.node, m.kind, m.wall_s)))
+        .collect();
+    let stored = store.keys()?;
     let removed = store.gc(&keep, !args.yes)?;
     for k in &removed {
-        println!("{} {k}", if args.yes { "removed" } else { "would remove" });
+        let what = described.get(k).map_or("unreadable or partial artifact", String::as_str);
+        println!("{} {} {what}", if args.yes { "removed" } else { "would remove" }, &k[..k.len().min(12)]);
     }
     println!(
-        "{} artifacts {}; {} kept",
+        "{} artifacts {}; {} kept (of {} the pipeline files name)",
         removed.len(),
         if args.yes { "removed" } else { "unreferenced (dry run; --yes deletes them)" },
+        stored.iter().filter(|k| keep.contains(*k)).count(),
         keep.len()
     );
     Ok(())

@@ -41,6 +41,7 @@ pub fn export(r: &Rollouts, format: ExportFormat, w: &mut impl Write) -> std::io
             let mut header = vec!["episode".to_string(), "t".into(), "noise".into(), "group".into()];
             header.extend((0..od).map(|i| format!("obs_{i}")));
             header.extend((0..ad).map(|i| format!("action_{i}")));
+            header.extend((0..od).map(|i| format!("next_obs_{i}")));
             header.extend(
                 ["reward", "reward_forward", "reward_ctrl", "reward_survive", "learned_reward", "terminated", "truncated"]
                     .map(String::from),
@@ -60,6 +61,7 @@ fn csv_row(r: &Rollouts, e: usize, t: &Trajectory, s: usize) -> String {
     let mut row = vec![e.to_string(), s.to_string(), t.meta.noise.to_string(), t.meta.group.to_string()];
     row.extend(t.obs_row(s).iter().map(|x| x.to_string()));
     row.extend(t.action_row(s).iter().map(|x| x.to_string()));
+    row.extend(t.obs_row(s + 1).iter().map(|x| x.to_string()));
     let last = s + 1 == t.len();
     row.extend([
         t.rewards[s].to_string(),

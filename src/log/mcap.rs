@@ -125,6 +125,10 @@ fn nums(v: &serde_json::Value, key: &str) -> Option<Vec<f32>> {
 
 pub fn read(path: &Path) -> Result<Rollouts> {
     let buf = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    // Another kind of file is named as such, not called corrupt (nor offered for deletion).
+    if !buf.starts_with(mcap::MAGIC) {
+        return Err(Error::file(path, "is not an MCAP file (rollouts are the rollouts.mcap files of a store's artifacts)"));
+    }
     // A file cut short has no valid footer; catch that before streaming.
     mcap::read::footer(&buf).map_err(|e| corrupt(path, e))?;
     let summary = mcap::read::Summary::read(&buf).map_err(|e| corrupt(path, e))?.ok_or_else(|| corrupt(path, "no summary section"))?;

@@ -178,6 +178,18 @@ pub enum PlanFormat {
 }
 
 /// The graph in `format`; `stored` says whether a key is in the store.
+/// A node's inputs, each source node once (in first-role order) with how many roles read it.
+fn distinct_inputs(n: &Node) -> Vec<(&str, usize)> {
+    let mut out: Vec<(&str, usize)> = Vec::new();
+    for (_, src) in &n.inputs {
+        match out.iter_mut().find(|(s, _)| *s == src.as_str()) {
+            Some((_, c)) => *c += 1,
+            None => out.push((src.as_str(), 1)),
+        }
+    }
+    out
+}
+
 pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) -> bool, format: PlanFormat) -> String {
     let mut out = String::new();
     let id = |name: &str| name.replace(['/', '-'], "_");
@@ -205,7 +217,7 @@ pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) 
                     &k[..12],
                     if stored(k) { "stored" } else { "missing" }
                 ));
-                for (_, src) in &n.inputs {
+                for (src, _) in distinct_inputs(n) {
                     out.push_str(&format!("  {} --> {}\n", id(src), id(&n.name)));
                 }
                 if stored(k) {
@@ -216,7 +228,9 @@ pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) 
         PlanFormat::Text => {
             for n in &g.nodes {
                 let k = &keys[&n.name];
-                let inputs: Vec<&str> = n.inputs.iter().map(|(_, s)| s.as_str()).collect();
+                // A node read under several roles (interpolation's older policies) once, counted.
+                let inputs: Vec<String> =
+                    distinct_inputs(n).into_iter().map(|(s, c)| if c > 1 { format!("{s} x{c}") } else { s.to_string() }).collect();
                 out.push_str(&format!(
                     "{:<8} {}  {:<38} {:<24} <- {}\n",
                     if stored(k) { "stored" } else { "missing" },

@@ -14,6 +14,17 @@ use super::stage::StageCtx;
 use crate::error::{Error, Result};
 use crate::store::{Manifest, Store, now_unix};
 
+/// A running stage whose amount of work is unknown: a spinner and the time it has taken.
+/// (A bar would read 0/0 and look finished.) Messages are cut at the terminal's width.
+fn working_style() -> ProgressStyle {
+    ProgressStyle::with_template("  {spinner} {prefix:<30} {elapsed:>4} {wide_msg}").expect("template")
+}
+
+/// A running stage that knows its amount of work: a bar, percent and time left.
+pub fn bar_style() -> ProgressStyle {
+    ProgressStyle::with_template("  {spinner} {prefix:<30} {bar:20} {percent:>3}% eta {eta:>4} {wide_msg}").expect("template")
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub enum Status {
     /// Found intact in the store.
@@ -141,8 +152,8 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     let threads = (cores / jobs).max(1);
     let multi = MultiProgress::with_draw_target(if opts.progress { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() });
     let overall = multi.add(ProgressBar::new(graph.nodes.len() as u64));
-    overall.set_style(ProgressStyle::with_template("[{elapsed_precise}] {bar:30} {pos}/{len} stages {msg}").expect("template"));
-    let stage_style = ProgressStyle::with_template("  {spinner} {prefix:<36} {bar:20} {pos}/{len} {msg}").expect("template");
+    overall.set_style(ProgressStyle::with_template("[{elapsed_precise}] {bar:30} {pos}/{len} stages {wide_msg}").expect("template"));
+    let stage_style = working_style();
 
     let mut status: BTreeMap<String, Status> = BTreeMap::new();
     let mut running: BTreeSet<String> = BTreeSet::new();
@@ -188,8 +199,16 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             }
             let (name, s) = rx.recv().expect("a worker reports before it exits");
             running.remove(&name);
-            if let Status::Failed { error, .. } = &s {
-                overall.println(format!("failed: {name}: {error}"));
+            // Finished stages leave one line above the bars (or in the log, without a
+            // terminal): what happened and how long it took.
+            let line = match &s {
+                Status::Failed { error, .. } => Some(format!("  failed    {name}: {error}")),
+                Status::Computed { wall_s } => Some(format!("  computed  {name} ({wall_s:.1} s)")),
+                Status::Cached => Some(format!("  reused    {name}")),
+                Status::Skipped { .. } => None,
+            };
+            if let Some(line) = line.filter(|_| opts.progress) {
+                if multi.is_hidden() { eprintln!("{line}") } else { multi.println(line).ok().unwrap_or(()) }
             }
             overall.inc(1);
             status.insert(name, s);

@@ -168,6 +168,13 @@ fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
 static STAGING_COUNTER: AtomicU64 = AtomicU64::new(0);
 
 impl Store {
+    /// A handle for reading only (plan, report, verify): creates nothing, so that looking at a
+    /// store never leaves `.tmp` and `.locks` behind, or a store where there was none.
+    pub fn at(root: impl Into<PathBuf>) -> Self {
+        Store { root: root.into() }
+    }
+
+    /// Opens a store for writing, creating it if needed.
     pub fn open(root: impl Into<PathBuf>) -> Result<Self> {
         let root = root.into();
         for sub in [".tmp", ".locks"] {

@@ -269,6 +269,7 @@ pub struct DegradationMetrics {
 /// The progress callback PPO-based stages give [`crate::algo::ppo::train`].
 pub fn ppo_progress<'a>(ctx: &'a StageCtx<'a>, total: usize) -> impl FnMut(&crate::algo::ppo::PpoProgress) + 'a {
     ctx.progress.set_length(total as u64);
+    ctx.progress.set_style(crate::pipeline::runner::bar_style());
     move |p| {
         ctx.progress.set_position(p.global_step as u64);
         if let Some(r) = p.episodic_return {
