@@ -214,11 +214,17 @@ pub struct ConfigError {
     pub line: usize,
     pub column: usize,
     pub message: String,
+    /// Further mistakes in the same file, each shown on its own line.
+    pub also: Vec<ConfigError>,
 }
 
 impl std::fmt::Display for ConfigError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, self.message)
+        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, self.message)?;
+        for e in &self.also {
+            write!(f, "\n{e}")?;
+        }
+        Ok(())
     }
 }
 
@@ -263,6 +269,7 @@ impl Pipeline {
             line: 0,
             column: 0,
             message: format!("cannot read the pipeline file: {e}"),
+            also: vec![],
         })?;
         Self::parse(path, &text)
     }
@@ -270,7 +277,7 @@ impl Pipeline {
     pub fn parse(path: &Path, text: &str) -> Result<Pipeline, ConfigError> {
         let at = |keys: &[&str], message: String| {
             let (line, column) = locate(text, keys);
-            ConfigError { file: path.into(), line, column, message }
+            ConfigError { file: path.into(), line, column, message, also: vec![] }
         };
         if let Ok(doc) = serde_yaml::from_str::<serde_yaml::Value>(text)
             && let Some(keys) = non_finite(&doc, &mut Vec::new())
@@ -294,95 +301,103 @@ impl Pipeline {
             } else {
                 ""
             };
-            ConfigError { file: path.into(), line, column, message: format!("{msg}{hint}") }
+            ConfigError { file: path.into(), line, column, message: format!("{msg}{hint}"), also: vec![] }
         })?;
+        // Every semantic mistake is collected, so that one run of the command lists them all.
+        let mut problems: Vec<ConfigError> = Vec::new();
+        let mut bad = |keys: &[&str], message: String| problems.push(at(keys, message));
         if spec.version != SCHEMA_VERSION {
-            return Err(at(&["version"], format!("schema version {} is not supported; write `version: {SCHEMA_VERSION}`", spec.version)));
+            bad(&["version"], format!("schema version {} is not supported; write `version: {SCHEMA_VERSION}`", spec.version));
         }
-        let env: EnvId = spec.env.parse().map_err(|e: crate::Error| at(&["env"], format!("{e}; write e.g. `env: Hopper-v5`")))?;
-        let positive = |v: usize, keys: &[&str], what: &str| -> Result<(), ConfigError> {
-            if v == 0 { Err(at(keys, format!("{what} must be at least 1"))) } else { Ok(()) }
+        let env: Option<EnvId> = match spec.env.parse() {
+            Ok(e) => Some(e),
+            Err(e) => {
+                let e: crate::Error = e;
+                bad(&["env"], format!("{e}; write e.g. `env: Hopper-v5`"));
+                None
+            }
         };
         if spec.seeds.is_empty() {
-            return Err(at(&["seeds"], "seeds is empty; give at least one seed, e.g. `seeds: [0, 1, 2]`".into()));
+            bad(&["seeds"], "seeds is empty; give at least one seed, e.g. `seeds: [0, 1, 2]`".into());
         }
         if spec.methods.is_empty() {
-            return Err(at(
-                &["methods"],
-                "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into(),
-            ));
+            bad(&["methods"], "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into());
         }
-        positive(spec.iterations, &["iterations"], "iterations (K)")?;
+        let mut positive = |v: usize, keys: &[&str], what: &str| {
+            if v == 0 {
+                bad(keys, format!("{what} must be at least 1"));
+            }
+        };
+        positive(spec.iterations, &["iterations"], "iterations (K)");
         if spec.demos.from.is_none() {
-            positive(spec.demos.episodes, &["demos", "episodes"], "demos.episodes (or give demos.from)")?;
-            positive(spec.demonstrator.steps, &["demonstrator", "steps"], "demonstrator.steps")?;
+            positive(spec.demos.episodes, &["demos", "episodes"], "demos.episodes (or give demos.from)");
+            positive(spec.demonstrator.steps, &["demonstrator", "steps"], "demonstrator.steps");
         }
-        positive(spec.bc.iterations, &["bc", "iterations"], "bc.iterations")?;
-        positive(spec.bc.batch_size, &["bc", "batch_size"], "bc.batch_size")?;
-        positive(spec.eval.episodes, &["eval", "episodes"], "eval.episodes")?;
-        positive(spec.noise.rollouts_per_level, &["noise", "rollouts_per_level"], "noise.rollouts_per_level")?;
+        positive(spec.bc.iterations, &["bc", "iterations"], "bc.iterations");
+        positive(spec.bc.batch_size, &["bc", "batch_size"], "bc.batch_size");
+        positive(spec.eval.episodes, &["eval", "episodes"], "eval.episodes");
+        positive(spec.noise.rollouts_per_level, &["noise", "rollouts_per_level"], "noise.rollouts_per_level");
+        positive(spec.trex.models, &["trex", "models"], "trex.models");
+        positive(spec.trex.iterations, &["trex", "iterations"], "trex.iterations");
+        positive(spec.trex.window, &["trex", "window"], "trex.window");
+        positive(spec.trex.pairs_per_model, &["trex", "pairs_per_model"], "trex.pairs_per_model");
+        let mut bad = |keys: &[&str], message: String| problems.push(at(keys, message));
         if spec.noise.schedule.is_empty() {
-            return Err(at(
-                &["noise", "schedule"],
-                "the noise schedule is empty; give epsilon levels, e.g. `schedule: [0.0, 0.25, 0.5, 0.75, 1.0]`".into(),
-            ));
+            bad(&["noise", "schedule"], "the noise schedule is empty; give epsilon levels, e.g. `schedule: [0.0, 0.25, 0.5, 0.75, 1.0]`".into());
+        } else if let Some(out) = spec.noise.schedule.iter().find(|e| !(0.0..=1.0).contains(*e)) {
+            bad(&["noise", "schedule"], format!("epsilon {out} is outside [0, 1]"));
+        } else {
+            let span = spec.noise.schedule.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+                - spec.noise.schedule.iter().copied().fold(f64::INFINITY, f64::min);
+            if spec.trex.min_margin > span + 1e-12 {
+                bad(
+                    &["trex", "min_margin"],
+                    format!(
+                        "min_margin {} is larger than the noise schedule's span {span}, so no pair can be formed; use at most {span}",
+                        spec.trex.min_margin
+                    ),
+                );
+            }
         }
-        if let Some(bad) = spec.noise.schedule.iter().find(|e| !(0.0..=1.0).contains(*e)) {
-            return Err(at(&["noise", "schedule"], format!("epsilon {bad} is outside [0, 1]")));
-        }
-        let span = spec.noise.schedule.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-            - spec.noise.schedule.iter().copied().fold(f64::INFINITY, f64::min);
-        if spec.trex.min_margin > span + 1e-12 {
-            return Err(at(
-                &["trex", "min_margin"],
-                format!(
-                    "min_margin {} is larger than the noise schedule's span {span}, so no pair can be formed; use at most {span}",
-                    spec.trex.min_margin
-                ),
-            ));
-        }
-        positive(spec.trex.models, &["trex", "models"], "trex.models")?;
-        positive(spec.trex.iterations, &["trex", "iterations"], "trex.iterations")?;
-        positive(spec.trex.window, &["trex", "window"], "trex.window")?;
-        positive(spec.trex.pairs_per_model, &["trex", "pairs_per_model"], "trex.pairs_per_model")?;
         let batch = spec.ppo.num_envs * spec.ppo.num_steps;
         if spec.ppo.total_steps < batch || batch == 0 {
-            return Err(at(
-                &["ppo", "total_steps"],
-                format!("ppo.total_steps {} is less than one rollout (num_envs x num_steps = {batch})", spec.ppo.total_steps),
-            ));
+            bad(&["ppo", "total_steps"], format!("ppo.total_steps {} is less than one rollout (num_envs x num_steps = {batch})", spec.ppo.total_steps));
         }
         for (m, o) in &spec.overrides {
-            let bad = |section: &str, e: serde_json::Error| {
-                at(&["overrides", m.name(), section], format!("overrides.{}.{section}: {e}", m.name()))
-            };
-            if let Some(v) = &o.trex {
-                serde_json::from_value::<TrexConfig>(merge(serde_json::to_value(&spec.trex).expect("serialises"), v))
-                    .map_err(|e| bad("trex", e))?;
+            if let Some(v) = &o.trex
+                && let Err(e) = serde_json::from_value::<TrexConfig>(merge(serde_json::to_value(&spec.trex).expect("serialises"), v))
+            {
+                bad(&["overrides", m.name(), "trex"], format!("overrides.{}.trex: {e}", m.name()));
             }
-            if let Some(v) = &o.ppo {
-                serde_json::from_value::<PpoConfig>(merge(serde_json::to_value(&spec.ppo).expect("serialises"), v))
-                    .map_err(|e| bad("ppo", e))?;
+            if let Some(v) = &o.ppo
+                && let Err(e) = serde_json::from_value::<PpoConfig>(merge(serde_json::to_value(&spec.ppo).expect("serialises"), v))
+            {
+                bad(&["overrides", m.name(), "ppo"], format!("overrides.{}.ppo: {e}", m.name()));
             }
         }
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
-            return Err(at(&["idrex"], "idrex rollouts per level must be at least 1".into()));
+            bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
         }
         let base = path.parent().unwrap_or(Path::new("."));
         let store = spec.store.as_ref().map_or_else(|| PathBuf::from("artifacts"), |s| base.join(s));
         let name = spec.name.clone().unwrap_or_else(|| path.file_stem().map_or("pipeline".into(), |s| s.to_string_lossy().into_owned()));
-        let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         if let Some(from) = &spec.demos.from {
             let p = base.join(from);
             if !p.is_file() {
-                return Err(at(
-                    &["demos", "from"],
-                    format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()),
-                ));
+                bad(&["demos", "from"], format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()));
+            } else if let Some(env) = env
+                && let Err(e) = crate::pipeline::stage::demos::load(&p, env)
+            {
+                // Bad data is refused now, before any stage runs.
+                bad(&["demos", "from"], format!("demonstration file {e}"));
             }
-            // Bad data is refused now, before any stage runs.
-            crate::pipeline::stage::demos::load(&p, env).map_err(|e| at(&["demos", "from"], format!("demonstration file {e}")))?;
         }
+        let (Some(env), true) = (env, problems.is_empty()) else {
+            let mut first = problems.remove(0);
+            first.also = problems;
+            return Err(first);
+        };
+        let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
         Ok(Pipeline { file: path.into(), name, env, store, spec, composition })
     }
@@ -461,6 +476,16 @@ mod tests {
         assert_eq!(p.spec.bc.iterations, 50_000);
         assert_eq!(p.spec.trex.window, 50);
         assert_eq!(p.composition.ctrl_coeff, 1e-3);
+    }
+
+    #[test]
+    fn every_mistake_in_a_file_is_reported_at_once() {
+        let e = err("version: 1\nenv: Hopper-v5\nseeds: []\neval:\n  episodes: 0\nppo:\n  total_steps: 10\n");
+        let lines: Vec<&str> = e.lines().collect();
+        assert_eq!(lines.len(), 3, "{e}");
+        assert!(lines[0].starts_with("p.yaml:3:") && lines[0].contains("seeds is empty"), "{e}");
+        assert!(lines.iter().any(|l| l.contains("eval.episodes must be at least 1")), "{e}");
+        assert!(lines.iter().any(|l| l.contains("less than one rollout")), "{e}");
     }
 
     #[test]
