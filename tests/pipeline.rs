@@ -112,6 +112,10 @@ print("ok", len(sys.argv) - 1)
     let md = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
     assert!(md.contains("| Hopper-v5 | smoke |"), "{md}");
     assert!(!md.contains("missing"), "every method has results: {md}");
+    // What the tables do not show: episode counts, the rewards' validation accuracy, what
+    // multi-BC's clone filter kept.
+    assert!(md.contains(" episodes) |"), "{md}");
+    assert!(md.contains("## Notes") && md.contains("held-out training pairs") && md.contains("the clone filter kept"), "{md}");
     // The figures: SVG and PNG of each kind, linked from report.md; every PNG decodes at its
     // size and is not blank (many colours, a good share of non-white pixels).
     let figures = out_dir.join("figures");

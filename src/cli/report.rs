@@ -40,7 +40,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         crate::report::write_csv(&mut crate::report::protocols_frame(&t.protocols)?, &args.out.join("protocols.csv"))?;
     }
     let figures = crate::report::figures::write(&store, &t.protocols, &args.out.join("figures"))?;
-    let md = format!("{}{}", crate::report::markdown(&t), crate::report::figures::markdown(&figures, "figures"));
+    let notes = crate::report::notes(&store)?;
+    let md = format!("{}{notes}{}", crate::report::markdown(&t), crate::report::figures::markdown(&figures, "figures"));
     if args.format != ReportFormat::Csv {
         std::fs::write(args.out.join("report.md"), &md)?;
     }

@@ -333,6 +333,60 @@ pub fn build(store: &Store) -> Result<Tables> {
     Ok(Tables { returns, protocols, runs, demos, accuracy })
 }
 
+/// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
+/// accuracy, and what multi-BC's clone filter kept (when it keeps none, multi-BC's reward is
+/// trained on D-REX's rankings alone, and its results equal D-REX's).
+pub fn notes(store: &Store) -> Result<String> {
+    let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for m in store.manifests()? {
+        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(&m) else { continue };
+        let Some(reward) = m.inputs.get("reward") else { continue };
+        if !seen.insert((p.pipeline.clone(), reward.clone())) {
+            continue;
+        }
+        let Ok(rm) = store.check(reward) else { continue };
+        let group = lines.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
+        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(&rm) {
+            let label = if p.iteration > 2 { format!("{} (k={})", p.method.label(), p.iteration) } else { p.method.label().to_string() };
+            group.insert(format!(
+                "{label}: the learned reward ({}) ranks {:.1} % of held-out training pairs correctly; on its training set Pearson {:.2}",
+                rm.node,
+                t.val_accuracy * 100.0,
+                t.train_set.pearson
+            ));
+        }
+        for (role, key) in &rm.inputs {
+            if let (true, Ok(sm)) = (role.starts_with("set"), store.check(key))
+                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(&sm)
+            {
+                let kept = x.clones.iter().filter(|c| c.kept).count();
+                let mut line = format!(
+                    "{}: the clone filter kept {kept} of {} clones (threshold {:.1} predicted return)",
+                    sm.node,
+                    x.clones.len(),
+                    x.threshold
+                );
+                if kept == 0 {
+                    line.push_str("; with none kept, multi-BC's reward saw D-REX's rankings only, so its figures repeat D-REX's");
+                }
+                group.insert(line);
+            }
+        }
+    }
+    let mut out = String::new();
+    if !lines.is_empty() {
+        out.push_str("\n## Notes\n");
+        for ((env, pipeline), group) in lines {
+            out.push_str(&format!("\n### {env} {pipeline}\n\n"));
+            for l in group {
+                out.push_str(&format!("- {l}\n"));
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// A figure with one decimal; never "NaN" (a figure that could not be computed says so).
 fn num(x: Option<f64>) -> String {
     match x {
@@ -388,12 +442,17 @@ pub fn markdown(t: &Tables) -> String {
                     } else {
                         format!("; run {} missing", missing.join(", "))
                     };
+                    let episodes = cell_f(&t.returns, "episodes", i).unwrap_or(0.0);
                     format!(
                         " {} ± {} ({}{}{missing}) |",
                         num(cell_f(&t.returns, "mean", i)),
                         num(cell_f(&t.returns, "std", i)),
                         num(cell_f(&t.returns, "best_run_avg", i)),
-                        if m == Method::Bc.name() { String::new() } else { format!(", {runs:.0} runs") }
+                        if m == Method::Bc.name() {
+                            format!(", {episodes:.0} episodes")
+                        } else {
+                            format!(", {runs:.0} runs, {episodes:.0} episodes")
+                        }
                     )
                 }
             };
