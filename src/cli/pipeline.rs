@@ -72,7 +72,30 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
     let g = expand(&p)?;
     let stored = |k: &str| store.check(k).is_ok();
-    print!("{}", graph::render(&g, &g.keys(), &stored, args.format));
+    let keys = g.keys();
+    print!("{}", graph::render(&g, &keys, &stored, args.format));
+    if args.format == PlanFormat::Text {
+        // What is left, estimated from the store's own stage times (see pipeline::schedule).
+        let est = crate::pipeline::schedule::Estimates::from_manifests(&store.manifests().unwrap_or_default());
+        let cost = |n: &crate::pipeline::Node| if stored(&keys[&n.name]) { 0.0 } else { est.seconds(n) };
+        let (path, cp) = crate::pipeline::schedule::critical_path(&g, &cost);
+        let total: f64 = g.nodes.iter().map(cost).sum();
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let path: Vec<&str> = path.iter().filter(|n| !stored(&keys[n.as_str()])).map(String::as_str).collect();
+        let guessed: Vec<&str> = crate::pipeline::stage::StageKind::ALL.iter().filter(|k| !est.measured(**k)).map(|k| k.name()).collect();
+        println!(
+            "\nestimated: {:.1} min of stage time left, critical path {:.1} min; with {cores} jobs at least {:.1} min",
+            total / 60.0,
+            cp / 60.0,
+            cp.max(total / cores as f64) / 60.0
+        );
+        if !path.is_empty() {
+            println!("critical path: {}", path.join(" -> "));
+        }
+        if !guessed.is_empty() {
+            println!("(no stored artifact of {}: their times are the reference machine's)", guessed.join(", "));
+        }
+    }
     Ok(())
 }
 

@@ -8,6 +8,7 @@ pub mod idrex;
 pub mod plots;
 pub mod recompute;
 pub mod runner;
+pub mod schedule;
 pub mod stage;
 
 pub use config::{Method, Pipeline};

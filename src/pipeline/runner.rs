@@ -147,6 +147,11 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     let _using = store.in_use()?;
     store.clean_stale_staging();
     let keys = graph.keys();
+    // Critical path first: the ready stage with the most estimated work behind it starts.
+    let estimates = super::schedule::Estimates::from_manifests(&store.manifests()?);
+    let priority = super::schedule::remaining(graph, &|n| {
+        if store.check(&keys[&n.name]).is_ok() && !opts.force.contains(&n.name) { 0.0 } else { estimates.seconds(n) }
+    });
     let jobs = opts.jobs.max(1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = (cores / jobs).max(1);
@@ -172,12 +177,14 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                     overall.inc(1);
                 }
             }
-            let ready: Vec<&Node> = graph
+            let mut ready: Vec<&Node> = graph
                 .nodes
                 .iter()
                 .filter(|n| !status.contains_key(&n.name) && !running.contains(&n.name))
                 .filter(|n| n.inputs.iter().all(|(_, i)| matches!(status.get(i), Some(Status::Cached | Status::Computed { .. }))))
                 .collect();
+            // Stable: equal estimates keep the graph's order.
+            ready.sort_by(|a, b| priority[&b.name].total_cmp(&priority[&a.name]));
             for n in ready.into_iter().take(jobs.saturating_sub(running.len())) {
                 running.insert(n.name.clone());
                 let key = keys[&n.name].clone();

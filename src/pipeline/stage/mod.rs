@@ -50,7 +50,7 @@ pub const REWARD: &str = "reward";
 /// and the dispatch to its body, so that adding a kind is one line here plus its file.
 macro_rules! stage_kinds {
     ($($kind:ident = $name:literal: $params:ty => $metrics:ty, $body:path;)*) => {
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
         pub enum StageKind {
             $(#[serde(rename = $name)] $kind,)*
         }

@@ -1,0 +1,149 @@
+//! Which ready stage runs first: the one with the longest estimated chain of work still
+//! behind it (critical path first), so that BC and the T-REX rewards, which everything
+//! downstream waits on, start as early as they can and the PPO runs and evaluations fill
+//! the cores around them.
+//!
+//! A stage's time is estimated from the store: per stage kind, the median of the stored
+//! artifacts' seconds per unit of work (PPO and demonstrator steps, BC iterations, T-REX
+//! iterations x models, rollouts, evaluation episodes), times this node's work. Kinds the
+//! store has not seen use figures measured on the 2-core reference machine at the paper's
+//! settings. Stored nodes cost nothing.
+use std::collections::BTreeMap;
+
+use super::graph::{Graph, Node};
+use super::stage::{Params, StageKind};
+use crate::store::Manifest;
+
+/// How much work a node is, in its kind's unit.
+fn work(params: &Params) -> f64 {
+    let n = match params {
+        Params::Ppo(p) => p.ppo.total_steps,
+        Params::Demonstrator(p) => p.ppo.total_steps,
+        Params::Bc(p) => p.bc.iterations,
+        Params::MultiBcRollouts(p) => p.bc.iterations * 3 + p.schedule.len() * p.rollouts_per_level,
+        Params::Trex(p) => p.trex.iterations * p.trex.models,
+        Params::NoiseRollouts(p) => p.schedule.len() * p.rollouts_per_level,
+        Params::InterpolationRollouts(p) => p.alphas.len() * p.rollouts_per_level,
+        Params::ActionNoiseRollouts(p) => p.sigmas.len() * p.rollouts_per_level,
+        Params::Eval(p) => p.episodes,
+        Params::Demos(p) => p.episodes,
+        Params::DemosImport(_) | Params::TestValue(_) => 1,
+    };
+    n.max(1) as f64
+}
+
+/// Seconds per unit of work on the reference machine (2 cores, HalfCheetah at the paper's
+/// settings, `--jobs 2`), for kinds the store has no artifact of.
+fn reference_rate(kind: StageKind) -> f64 {
+    match kind {
+        StageKind::Ppo | StageKind::Demonstrator => 65.0 / 1e6,
+        StageKind::Bc => 139.0 / 50_000.0,
+        StageKind::MultiBcRollouts => 420.0 / 150_100.0,
+        StageKind::Trex => 230.0 / 9_000.0,
+        StageKind::NoiseRollouts | StageKind::InterpolationRollouts | StageKind::ActionNoiseRollouts => 20.0 / 100.0,
+        // 26 checkpoints of 20 episodes each.
+        StageKind::Eval => 12.0 / 20.0,
+        StageKind::Demos => 0.5,
+        StageKind::DemosImport | StageKind::TestValue => 0.01,
+    }
+}
+
+/// Seconds-per-unit rates per stage kind.
+#[derive(Debug, Clone, Default)]
+pub struct Estimates {
+    measured: BTreeMap<StageKind, f64>,
+}
+
+impl Estimates {
+    /// From the stored manifests (their parameters and wall times).
+    pub fn from_manifests(manifests: &[Manifest]) -> Self {
+        let mut rates: BTreeMap<StageKind, Vec<f64>> = BTreeMap::new();
+        for m in manifests {
+            let Some(kind) = StageKind::parse(&m.kind) else { continue };
+            let Ok(params) = Params::from_json(kind, &m.params) else { continue };
+            if m.wall_s.is_finite() && m.wall_s > 0.0 {
+                rates.entry(kind).or_default().push(m.wall_s / work(&params));
+            }
+        }
+        let measured = rates
+            .into_iter()
+            .map(|(k, mut v)| {
+                v.sort_by(f64::total_cmp);
+                (k, v[v.len() / 2])
+            })
+            .collect();
+        Estimates { measured }
+    }
+
+    /// The estimated seconds `node` takes to compute.
+    pub fn seconds(&self, node: &Node) -> f64 {
+        let kind = node.kind();
+        self.measured.get(&kind).copied().unwrap_or_else(|| reference_rate(kind)) * work(&node.params)
+    }
+
+    /// Whether the store gave the rate of `kind` (else the reference machine's is used).
+    pub fn measured(&self, kind: StageKind) -> bool {
+        self.measured.contains_key(&kind)
+    }
+}
+
+/// Per node, its own cost plus the costliest chain of descendants after it.
+pub fn remaining(g: &Graph, cost: &dyn Fn(&Node) -> f64) -> BTreeMap<String, f64> {
+    let mut out: BTreeMap<String, f64> = BTreeMap::new();
+    // Nodes are in topological order: walk it backwards.
+    for n in g.nodes.iter().rev() {
+        let after =
+            g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| out[&c.name]).fold(0.0, f64::max);
+        out.insert(n.name.clone(), cost(n) + after);
+    }
+    out
+}
+
+/// The critical path (node names, first to last) and its estimated seconds.
+pub fn critical_path(g: &Graph, cost: &dyn Fn(&Node) -> f64) -> (Vec<String>, f64) {
+    let rem = remaining(g, cost);
+    let roots = g.nodes.iter().filter(|n| n.inputs.is_empty());
+    let Some(mut at) = roots.max_by(|a, b| rem[&a.name].total_cmp(&rem[&b.name])) else { return (vec![], 0.0) };
+    let total = rem[&at.name];
+    let mut path = vec![at.name.clone()];
+    while let Some(next) =
+        g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == at.name)).max_by(|a, b| rem[&a.name].total_cmp(&rem[&b.name]))
+    {
+        path.push(next.name.clone());
+        at = next;
+    }
+    (path, total)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::Pipeline;
+
+    fn graph() -> Graph {
+        let text = "version: 1\nenv: Hopper-v5\nseeds: [0, 1]\n";
+        crate::pipeline::expand(&Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn remaining_work_is_a_node_plus_its_longest_chain() {
+        let g = graph();
+        let cost = |n: &Node| if n.kind() == StageKind::Trex { 10.0 } else { 1.0 };
+        let rem = remaining(&g, &cost);
+        for n in &g.nodes {
+            let children: Vec<f64> =
+                g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| rem[&c.name]).collect();
+            let want = cost(n) + children.iter().copied().fold(0.0, f64::max);
+            assert_eq!(rem[&n.name], want, "{}", n.name);
+        }
+        // The path starts at a root, follows inputs, and adds up to the root's figure.
+        let (path, total) = critical_path(&g, &cost);
+        assert!(g.get(&path[0]).unwrap().inputs.is_empty());
+        for w in path.windows(2) {
+            assert!(g.get(&w[1]).unwrap().inputs.iter().any(|(_, i)| *i == w[0]), "{w:?}");
+        }
+        assert_eq!(path.iter().map(|p| cost(g.get(p).unwrap())).sum::<f64>(), total);
+        // Two T-REX trainings lie on it (D-REX's, then iD-REX's), as in the paper's DAG.
+        assert!(path.iter().filter(|p| g.get(p).unwrap().kind() == StageKind::Trex).count() >= 2, "{path:?}");
+    }
+}
