@@ -243,3 +243,138 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
     println!("{}", serde_json::to_string_pretty(&out)?);
     Ok(())
 }
+
+#[derive(Debug, clap::Args)]
+pub struct LearnersBenchArgs {
+    /// Threads for both sides (idrex's T-REX members, libtorch and PyTorch).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// T-REX iterations per model (idrex is timed at N and 2N; the difference is the rate).
+    #[arg(long, default_value_t = 150)]
+    pub trex_iterations: usize,
+    /// BC iterations (idrex is timed at N and 2N likewise).
+    #[arg(long, default_value_t = 1500)]
+    pub bc_iterations: usize,
+    /// Python with torch for the baseline (default: the bootstrap environment's; "none" skips it).
+    #[arg(long)]
+    pub python: Option<String>,
+}
+
+/// Synthetic HalfCheetah-sized rollouts (17-dim observations, 6-dim actions): `n` episodes of
+/// `len` steps at D-REX's 20 noise levels, ranked by noise.
+fn synthetic(n: usize, len: usize, seed: u64) -> Vec<crate::data::Trajectory> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (od, ad) = (17, 6);
+    (0..n)
+        .map(|k| crate::data::Trajectory {
+            obs_dim: od,
+            act_dim: ad,
+            obs: (0..(len + 1) * od).map(|_| rng.random_range(-1.0..1.0f32)).collect(),
+            actions: (0..len * ad).map(|_| rng.random_range(-1.0..1.0f32)).collect(),
+            rewards: vec![0.0; len],
+            terms: vec![Default::default(); len],
+            terminated: false,
+            truncated: true,
+            meta: crate::data::TrajMeta { source: "bench".into(), noise: (k % 20) as f64 * 0.05, seed: k as u64, group: 0 },
+        })
+        .collect()
+}
+
+/// FLOPs of one model-iteration of T-REX at the report's shapes (64 pairs x 2 windows x 50
+/// steps through 17-256-256-1; backward counted as twice the forward).
+const TREX_FLOP: f64 = 3.0 * 2.0 * (64.0 * 2.0 * 50.0) * (17.0 * 256.0 + 256.0 * 256.0 + 256.0);
+/// FLOPs of one BC iteration (128 samples through 17-256-256-256-256-6).
+const BC_FLOP: f64 = 3.0 * 2.0 * 128.0 * (17.0 * 256.0 + 3.0 * 256.0 * 256.0 + 256.0 * 6.0);
+
+/// The machine's attainable fp32 rate on `threads` threads: libtorch's 2048 x 2048 matrix
+/// product (MKL/oneDNN), best of 5.
+fn gemm_gflops(threads: usize) -> f64 {
+    tch::set_num_threads(threads as i32);
+    let n = 2048;
+    let a = tch::Tensor::randn([n, n], (tch::Kind::Float, tch::Device::Cpu));
+    let b = tch::Tensor::randn([n, n], (tch::Kind::Float, tch::Device::Cpu));
+    let _ = a.matmul(&b);
+    let best = (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            let _ = a.matmul(&b);
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min);
+    crate::nn::single_threaded();
+    2.0 * (n as f64).powi(3) / best / 1e9
+}
+
+/// The seconds that n more iterations take: time(f(2n)) - time(f(n)), which leaves out the
+/// fixed costs (pair sampling, the final accuracy pass) the Python loop does not have.
+fn marginal(n: usize, mut f: impl FnMut(usize) -> anyhow::Result<()>) -> anyhow::Result<f64> {
+    let t = Instant::now();
+    f(n)?;
+    let once = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    f(2 * n)?;
+    Ok((t.elapsed().as_secs_f64() - once).max(1e-9))
+}
+
+pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
+    use crate::algo::{bc, trex};
+    let threads = args.threads.max(1);
+    let peak = gemm_gflops(threads);
+    // T-REX: 100 episodes of 1000 steps, 3 members on `threads` workers (each single-threaded).
+    let trajs = synthetic(100, 1000, 0);
+    let ranking = trex::Ranking::by_score(trajs.iter().map(|t| -t.meta.noise).collect());
+    crate::nn::single_threaded();
+    let trex_s = marginal(args.trex_iterations, |n| {
+        let cfg = trex::TrexConfig { iterations: n, ..Default::default() };
+        trex::train(&trajs, &ranking, &cfg, 0, threads).map(|_| ()).map_err(Into::into)
+    })?;
+    let trex_rate = (3 * args.trex_iterations) as f64 / trex_s;
+    // BC: one 1000-step demonstration, with `threads` libtorch threads as the PyTorch side
+    // gets (the pipeline runs it on one).
+    let demo = synthetic(1, 1000, 1);
+    tch::set_num_threads(threads as i32);
+    let bc_s = marginal(args.bc_iterations, |n| {
+        let cfg = bc::BcConfig { iterations: n, ..Default::default() };
+        bc::train(&demo, &cfg, 0).map(|_| ()).map_err(Into::into)
+    })?;
+    crate::nn::single_threaded();
+    let bc_rate = args.bc_iterations as f64 / bc_s;
+    let python = args.python.clone().or_else(default_python).filter(|p| p != "none");
+    let torch: Option<serde_json::Value> = match &python {
+        None => None,
+        Some(py) => {
+            let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("analysis/bench_learners.py");
+            let out = std::process::Command::new(py)
+                .arg(&script)
+                .args(["--threads", &threads.to_string()])
+                .args(["--trex-iterations", &args.trex_iterations.to_string()])
+                .args(["--bc-iterations", &args.bc_iterations.to_string()])
+                .output()
+                .with_context(|| format!("cannot run {py} {}", script.display()))?;
+            anyhow::ensure!(out.status.success(), "{}: {}", script.display(), String::from_utf8_lossy(&out.stderr));
+            Some(serde_json::from_slice(&out.stdout).context("the PyTorch baseline printed no JSON")?)
+        }
+    };
+    let get = |k: &str| torch.as_ref().and_then(|t| t[k].as_f64());
+    let (pt_trex, pt_bc) = (get("trex_model_iterations_per_s"), get("bc_iterations_per_s"));
+    let out = serde_json::json!({
+        "threads": threads,
+        "gemm_gflops": peak,
+        "trex": {
+            "idrex_model_iterations_per_s": trex_rate, "pytorch_model_iterations_per_s": pt_trex,
+            "ratio": pt_trex.map(|p| trex_rate / p), "gflop_per_model_iteration": TREX_FLOP / 1e9,
+            "fraction_of_gemm_peak": trex_rate * TREX_FLOP / 1e9 / peak,
+            "pytorch_fraction_of_gemm_peak": pt_trex.map(|p| p * TREX_FLOP / 1e9 / peak),
+        },
+        "bc": {
+            "idrex_iterations_per_s": bc_rate, "pytorch_iterations_per_s": pt_bc,
+            "ratio": pt_bc.map(|p| bc_rate / p), "gflop_per_iteration": BC_FLOP / 1e9,
+            "fraction_of_gemm_peak": bc_rate * BC_FLOP / 1e9 / peak,
+            "pytorch_fraction_of_gemm_peak": pt_bc.map(|p| p * BC_FLOP / 1e9 / peak),
+        },
+        "pytorch": torch,
+    });
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(())
+}

@@ -54,6 +54,9 @@ pub enum BenchCommand {
     /// T-REX on epsilon-greedy rollouts of a trained policy: rank correlation of predicted and
     /// true returns on held-out rollouts, and the training time.
     Trex(crate::bench::TrexBenchArgs),
+    /// T-REX and BC training speed at the report's shapes next to the same loops in PyTorch
+    /// (run by this command), and the fraction of the machine's fp32 matrix-product rate.
+    Learners(crate::bench::LearnersBenchArgs),
 }
 
 pub fn init_tracing(verbose: u8) {
@@ -77,6 +80,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Env(cmd) => env::run(&cmd),
         Command::Bench(BenchCommand::Env(args)) => crate::bench::env_bench(&args),
         Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
+        Command::Bench(BenchCommand::Learners(args)) => crate::bench::learners_bench(&args),
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),
