@@ -177,7 +177,6 @@ pub enum PlanFormat {
     Mermaid,
 }
 
-/// The graph in `format`; `stored` says whether a key is in the store.
 /// A node's inputs, each source node once (in first-role order) with how many roles read it.
 fn distinct_inputs(n: &Node) -> Vec<(&str, usize)> {
     let mut out: Vec<(&str, usize)> = Vec::new();
@@ -190,6 +189,7 @@ fn distinct_inputs(n: &Node) -> Vec<(&str, usize)> {
     out
 }
 
+/// The graph in `format`; `stored` says whether a key is in the store.
 pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) -> bool, format: PlanFormat) -> String {
     let mut out = String::new();
     let id = |name: &str| name.replace(['/', '-'], "_");
