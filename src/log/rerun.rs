@@ -12,7 +12,10 @@
 //! error (a full disk) and its flush then waits forever.
 use std::path::Path;
 
-use rerun::blueprint::{Blueprint, BlueprintActivation, ContainerLike, Grid, TextDocumentView, TimePanel, TimeSeriesView};
+use rerun::blueprint::components::PanelState;
+use rerun::blueprint::{
+    Blueprint, BlueprintActivation, BlueprintPanel, ContainerLike, Grid, SelectionPanel, TextDocumentView, TimePanel, TimeSeriesView,
+};
 
 use crate::error::{Error, Result};
 
@@ -90,7 +93,7 @@ impl Recording {
     }
 
     /// Sends the layout: the panels in a grid, automatic views off, the plot timeline
-    /// selected.
+    /// selected, the side and time panels collapsed so that the plots have the window.
     pub fn layout(&self, path: &Path, panels: Vec<Panel>) -> Result<()> {
         let views: Vec<ContainerLike> = panels
             .into_iter()
@@ -102,7 +105,9 @@ impl Recording {
         Blueprint::new(Grid::new(views))
             .with_auto_views(false)
             .with_auto_layout(false)
-            .with_time_panel(TimePanel::new().with_timeline(X))
+            .with_time_panel(TimePanel::new().with_timeline(X).with_state(PanelState::Collapsed))
+            .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
+            .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
             .send(&self.rec, BlueprintActivation::default())
             .map_err(|e| err(path, e))
     }
