@@ -103,15 +103,17 @@ fn range(xs: impl IntoIterator<Item = f64>) -> std::ops::Range<f64> {
     (lo - pad)..(hi + pad)
 }
 
+/// The legend box, in `corner`.
 fn legend<'a, DB: DrawingBackend + 'a, X: Ranged, Y: Ranged>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    corner: SeriesLabelPosition,
 ) -> std::result::Result<(), String> {
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .label_font((FONT, 14))
-        .position(SeriesLabelPosition::UpperRight)
+        .position(corner)
         .draw()
         .map_err(e2s)
 }
@@ -177,7 +179,7 @@ impl Figure for Degradation {
                 .label(format!("{} (mean ± std)", c.source))
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
         }
-        legend(&mut chart)
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
     }
 }
 
@@ -223,14 +225,7 @@ impl Figure for RewardScatter {
                 .label(label)
                 .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font((FONT, 14))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(e2s)
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)
     }
 }
 
@@ -292,14 +287,7 @@ impl Figure for PpoCurves {
                         .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour.stroke_width(2)));
                 }
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .label_font((FONT, 13))
-                .position(SeriesLabelPosition::LowerRight)
-                .draw()
-                .map_err(e2s)?;
+            legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         }
         Ok(())
     }
@@ -370,7 +358,7 @@ impl Figure for FinalBars {
                 .label(format!("demonstrations ({d:.1})"))
                 .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], DEMOS.stroke_width(2)));
         }
-        legend(&mut chart)
+        legend(&mut chart, SeriesLabelPosition::UpperRight)
     }
 }
 
