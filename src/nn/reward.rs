@@ -49,6 +49,9 @@ pub enum Combine {
     Mean,
     /// The last model's normalised output divided by the number of models (the original code).
     LastOverCount,
+    /// At each step the lowest of the models' normalised outputs: a pessimistic reward, which
+    /// pays only for what every member agrees is good.
+    Min,
 }
 
 /// Which action the control cost is charged on.
@@ -154,24 +157,21 @@ impl RewardEnsemble {
         }
         let n = raw[0].len();
         let k = self.norms.len();
-        let used: Vec<usize> = match comp.combine {
-            Combine::Mean => (0..k).collect(),
-            Combine::LastOverCount => vec![k - 1],
-        };
-        let mut out = vec![0.0; n];
-        for &m in &used {
+        let normalised = |m: usize, i: usize| {
             let (mean, std) = (self.norms[m].mean[0], (self.norms[m].var[0] + 1e-8).sqrt());
-            for (o, &x) in out.iter_mut().zip(&raw[m]) {
-                *o += ((x as f64 - mean) / std).clamp(-self.config.clip, self.config.clip);
-            }
-        }
-        for (i, o) in out.iter_mut().enumerate() {
-            let a = &cost_actions[i * act_dim..(i + 1) * act_dim];
-            // Both combinations divide by the number of models: the mean, or the original's
-            // last model over the count.
-            *o = *o / k as f64 - comp.ctrl_coeff * a.iter().map(|&x| (x as f64).powi(2)).sum::<f64>();
-        }
-        out
+            ((raw[m][i] as f64 - mean) / std).clamp(-self.config.clip, self.config.clip)
+        };
+        (0..n)
+            .map(|i| {
+                let learned = match comp.combine {
+                    Combine::Mean => (0..k).map(|m| normalised(m, i)).sum::<f64>() / k as f64,
+                    Combine::LastOverCount => normalised(k - 1, i) / k as f64,
+                    Combine::Min => (0..k).map(|m| normalised(m, i)).fold(f64::INFINITY, f64::min),
+                };
+                let a = &cost_actions[i * act_dim..(i + 1) * act_dim];
+                learned - comp.ctrl_coeff * a.iter().map(|&x| (x as f64).powi(2)).sum::<f64>()
+            })
+            .collect()
     }
 
     pub fn save(&self, dir: &Path, hyper: serde_json::Value) -> Result<()> {
@@ -228,5 +228,12 @@ mod tests {
             assert!((last[i] - want).abs() < 1e-9, "last-over-count {i}: {} vs {want}", last[i]);
         }
         assert!((last[0] - mean[0]).abs() > 1e-6, "the options change the reward");
+        // Pessimistic: the lower of the two normalised outputs at each step.
+        let pessimistic = Composition { ctrl_coeff: 0.1, combine: Combine::Min, ctrl_action: CtrlAction::Clipped };
+        let low = model.rl_reward(&obs, &clipped, &clipped, 1, &pessimistic, false);
+        for i in 0..2 {
+            let want = norm(0, i).min(norm(1, i)) - 0.1 * (clipped[i] as f64).powi(2);
+            assert!((low[i] - want).abs() < 1e-9, "min {i}: {} vs {want}", low[i]);
+        }
     }
 }

@@ -112,7 +112,7 @@ pub struct RewardSettings {
     /// Control-cost coefficient subtracted from the learned reward (default per environment:
     /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d).
     pub ctrl_coeff: Option<f64>,
-    /// mean, or last-over-count (the original code).
+    /// mean, last-over-count (the original code), or min (pessimistic).
     pub combine: Combine,
     /// raw (the original code; the default), or clipped.
     pub ctrl_action: CtrlAction,
