@@ -56,7 +56,9 @@ fn smoke_pipeline_end_to_end() {
     assert!(p.status.success(), "rerun rrd print: {}", stderr(&p));
     let printed = stdout(&p);
     let (mut entity, mut views, mut timelines) = (String::new(), std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
-    let blueprint = |e: &str| ["/view/", "/container/", "/viewport", "/time_panel", "/blueprint_panel", "/selection_panel"].iter().any(|p| e.starts_with(p));
+    let blueprint = |e: &str| {
+        ["/view/", "/container/", "/viewport", "/time_panel", "/blueprint_panel", "/selection_panel"].iter().any(|p| e.starts_with(p))
+    };
     for line in printed.lines() {
         if let Some(rest) = line.strip_prefix("Chunk(") {
             entity = rest.split(" - ").nth(1).unwrap_or_default().trim().to_string();

@@ -81,11 +81,8 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
         keep.extend(crate::pipeline::expand(&p)?.keys().into_values());
     }
     // What each doomed artifact is, read before it goes.
-    let described: std::collections::BTreeMap<String, String> = store
-        .manifests()?
-        .into_iter()
-        .map(|m| (m.key.clone(), format!("{} ({}, {:.0} s to compute)", m.node, m.kind, m.wall_s)))
-        .collect();
+    let described: std::collections::BTreeMap<String, String> =
+        store.manifests()?.into_iter().map(|m| (m.key.clone(), format!("{} ({}, {:.0} s to compute)", m.node, m.kind, m.wall_s))).collect();
     let stored = store.keys()?;
     let removed = store.gc(&keep, !args.yes)?;
     for k in &removed {

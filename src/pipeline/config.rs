@@ -321,7 +321,10 @@ impl Pipeline {
             bad(&["seeds"], "seeds is empty; give at least one seed, e.g. `seeds: [0, 1, 2]`".into());
         }
         if spec.methods.is_empty() {
-            bad(&["methods"], "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into());
+            bad(
+                &["methods"],
+                "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into(),
+            );
         }
         let mut positive = |v: usize, keys: &[&str], what: &str| {
             if v == 0 {
@@ -343,7 +346,10 @@ impl Pipeline {
         positive(spec.trex.pairs_per_model, &["trex", "pairs_per_model"], "trex.pairs_per_model");
         let mut bad = |keys: &[&str], message: String| problems.push(at(keys, message));
         if spec.noise.schedule.is_empty() {
-            bad(&["noise", "schedule"], "the noise schedule is empty; give epsilon levels, e.g. `schedule: [0.0, 0.25, 0.5, 0.75, 1.0]`".into());
+            bad(
+                &["noise", "schedule"],
+                "the noise schedule is empty; give epsilon levels, e.g. `schedule: [0.0, 0.25, 0.5, 0.75, 1.0]`".into(),
+            );
         } else if let Some(out) = spec.noise.schedule.iter().find(|e| !(0.0..=1.0).contains(*e)) {
             bad(&["noise", "schedule"], format!("epsilon {out} is outside [0, 1]"));
         } else {
@@ -361,7 +367,10 @@ impl Pipeline {
         }
         let batch = spec.ppo.num_envs * spec.ppo.num_steps;
         if spec.ppo.total_steps < batch || batch == 0 {
-            bad(&["ppo", "total_steps"], format!("ppo.total_steps {} is less than one rollout (num_envs x num_steps = {batch})", spec.ppo.total_steps));
+            bad(
+                &["ppo", "total_steps"],
+                format!("ppo.total_steps {} is less than one rollout (num_envs x num_steps = {batch})", spec.ppo.total_steps),
+            );
         }
         for (m, o) in &spec.overrides {
             if let Some(v) = &o.trex
@@ -384,7 +393,10 @@ impl Pipeline {
         if let Some(from) = &spec.demos.from {
             let p = base.join(from);
             if !p.is_file() {
-                bad(&["demos", "from"], format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()));
+                bad(
+                    &["demos", "from"],
+                    format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()),
+                );
             } else if let Some(env) = env
                 && let Err(e) = crate::pipeline::stage::demos::load(&p, env)
             {

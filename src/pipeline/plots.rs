@@ -110,7 +110,8 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
     }
     let degradation_curve = |node: &str, levels: &[DegradationLevel]| {
         let e = entity(node);
-        for (leaf, name, style) in [("mean", "mean", Style::Line), ("plus_std", "+ std", Style::ThinLine), ("minus_std", "- std", Style::ThinLine)]
+        for (leaf, name, style) in
+            [("mean", "mean", Style::Line), ("plus_std", "+ std", Style::ThinLine), ("minus_std", "- std", Style::ThinLine)]
         {
             rec.series(&format!("degradation/{e}/{leaf}"), &format!("{node}: {name}"), style);
         }

@@ -92,8 +92,7 @@ pub fn remaining(g: &Graph, cost: &dyn Fn(&Node) -> f64) -> BTreeMap<String, f64
     let mut out: BTreeMap<String, f64> = BTreeMap::new();
     // Nodes are in topological order: walk it backwards.
     for n in g.nodes.iter().rev() {
-        let after =
-            g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| out[&c.name]).fold(0.0, f64::max);
+        let after = g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| out[&c.name]).fold(0.0, f64::max);
         out.insert(n.name.clone(), cost(n) + after);
     }
     out
@@ -131,8 +130,7 @@ mod tests {
         let cost = |n: &Node| if n.kind() == StageKind::Trex { 10.0 } else { 1.0 };
         let rem = remaining(&g, &cost);
         for n in &g.nodes {
-            let children: Vec<f64> =
-                g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| rem[&c.name]).collect();
+            let children: Vec<f64> = g.nodes.iter().filter(|c| c.inputs.iter().any(|(_, i)| *i == n.name)).map(|c| rem[&c.name]).collect();
             let want = cost(n) + children.iter().copied().fold(0.0, f64::max);
             assert_eq!(rem[&n.name], want, "{}", n.name);
         }

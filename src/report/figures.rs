@@ -60,13 +60,21 @@ fn save(fig: &impl Figure, dir: &Path, stem: &str) -> Result<()> {
     let fail = |path: &Path, e: String| Error::file(path, format!("cannot draw the figure: {e}"));
     {
         let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(e2s).and_then(|_| fig.draw(&root)).and_then(|_| root.present().map_err(e2s)).map_err(|e| fail(&svg, e))?;
+        root.fill(&WHITE)
+            .map_err(e2s)
+            .and_then(|_| fig.draw(&root))
+            .and_then(|_| root.present().map_err(e2s))
+            .map_err(|e| fail(&svg, e))?;
     }
     let png = dir.join(format!("{stem}.png"));
     let mut pixels = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut pixels, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(e2s).and_then(|_| fig.draw(&root)).and_then(|_| root.present().map_err(e2s)).map_err(|e| fail(&png, e))?;
+        root.fill(&WHITE)
+            .map_err(e2s)
+            .and_then(|_| fig.draw(&root))
+            .and_then(|_| root.present().map_err(e2s))
+            .map_err(|e| fail(&png, e))?;
     }
     let file = std::fs::File::create(&png).map_err(|e| Error::io(&png, e))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), SIZE.0, SIZE.1);
@@ -85,8 +93,14 @@ fn method_colour(m: Method) -> RGBColor {
         Method::IdrexMultiBc => RGBColor(214, 39, 40),
     }
 }
-const SERIES: [RGBColor; 6] =
-    [RGBColor(31, 119, 180), RGBColor(255, 127, 14), RGBColor(44, 160, 44), RGBColor(214, 39, 40), RGBColor(148, 103, 189), RGBColor(140, 86, 75)];
+const SERIES: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
 const DEMOS: RGBColor = RGBColor(0, 0, 0);
 
 /// The value range of `xs`, padded by 5 % (and never empty).
@@ -155,9 +169,7 @@ impl Figure for Degradation {
             .draw()
             .map_err(e2s)?;
         if let Some((m, s)) = self.demos {
-            chart
-                .draw_series([Rectangle::new([(0.0, m - s), (x_max, m + s)], DEMOS.mix(0.08).filled())])
-                .map_err(e2s)?;
+            chart.draw_series([Rectangle::new([(0.0, m - s), (x_max, m + s)], DEMOS.mix(0.08).filled())]).map_err(e2s)?;
             chart
                 .draw_series(LineSeries::new([(0.0, m), (x_max, m)], DEMOS.stroke_width(2)))
                 .map_err(e2s)?
@@ -217,7 +229,11 @@ impl Figure for RewardScatter {
         for ((name, pts), colour) in self.sets.iter().zip(colours) {
             let (t, p): (Vec<f64>, Vec<f64>) = pts.iter().copied().unzip();
             let r = pearson(&t, &p);
-            let label = if r.is_finite() { format!("{name} ({} episodes, Pearson {r:.2})", pts.len()) } else { format!("{name} ({} episodes)", pts.len()) };
+            let label = if r.is_finite() {
+                format!("{name} ({} episodes, Pearson {r:.2})", pts.len())
+            } else {
+                format!("{name} ({} episodes)", pts.len())
+            };
             let size = if *name == "demonstrations" { 7 } else { 4 };
             chart
                 .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), size, colour.filled())))
@@ -323,7 +339,11 @@ impl Figure for FinalBars {
             .x_labels(methods.len())
             .x_label_formatter(&|x| {
                 let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 { labels.get(i as usize).map_or(String::new(), |s| s.to_string()) } else { String::new() }
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    labels.get(i as usize).map_or(String::new(), |s| s.to_string())
+                } else {
+                    String::new()
+                }
             })
             .x_desc("method")
             .y_desc("true return (mean over runs x episodes)")
@@ -338,12 +358,16 @@ impl Figure for FinalBars {
             let bars: Vec<(f64, &ProtocolRow)> = methods
                 .iter()
                 .enumerate()
-                .filter_map(|(i, m)| self.rows.iter().find(|r| r.method == m.name() && r.protocol == protocol).map(|r| (i as f64 + offset, r)))
+                .filter_map(|(i, m)| {
+                    self.rows.iter().find(|r| r.method == m.name() && r.protocol == protocol).map(|r| (i as f64 + offset, r))
+                })
                 .collect();
             chart
-                .draw_series(bars.iter().map(|&(x, r)| {
-                    Rectangle::new([(x - width / 2.0 * 0.9, 0.0), (x + width / 2.0 * 0.9, r.stats.mean)], colour.filled())
-                }))
+                .draw_series(
+                    bars.iter().map(|&(x, r)| {
+                        Rectangle::new([(x - width / 2.0 * 0.9, 0.0), (x + width / 2.0 * 0.9, r.stats.mean)], colour.filled())
+                    }),
+                )
                 .map_err(e2s)?
                 .label(protocol.name())
                 .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled()));
