@@ -76,7 +76,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     print!("{}", graph::render(&g, &keys, &stored, args.format));
     if args.format == PlanFormat::Text {
         // What is left, estimated from the store's own stage times (see pipeline::schedule).
-        let est = crate::pipeline::schedule::Estimates::from_manifests(&store.manifests().unwrap_or_default());
+        let est = crate::pipeline::schedule::Estimates::from_manifests(&store.unverified_manifests().unwrap_or_default());
         let cost = |n: &crate::pipeline::Node| if stored(&keys[&n.name]) { 0.0 } else { est.seconds(n) };
         let (path, cp) = crate::pipeline::schedule::critical_path(&g, &cost);
         let total: f64 = g.nodes.iter().map(cost).sum();

@@ -28,6 +28,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         bail!("no store at {}; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store", args.store.display());
     }
     let store = Store::at(&args.store);
+    let store = crate::report::Artifacts::read(&store)?;
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store.display());

@@ -148,9 +148,12 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     store.clean_stale_staging();
     let keys = graph.keys();
     // Critical path first: the ready stage with the most estimated work behind it starts.
-    let estimates = super::schedule::Estimates::from_manifests(&store.manifests()?);
+    // Ordering only, so the manifests are read without re-hashing their outputs.
+    let written = store.unverified_manifests()?;
+    let estimates = super::schedule::Estimates::from_manifests(&written);
+    let present: BTreeSet<&str> = written.iter().map(|m| m.key.as_str()).collect();
     let priority = super::schedule::remaining(graph, &|n| {
-        if store.check(&keys[&n.name]).is_ok() && !opts.force.contains(&n.name) { 0.0 } else { estimates.seconds(n) }
+        if present.contains(keys[&n.name].as_str()) && !opts.force.contains(&n.name) { 0.0 } else { estimates.seconds(n) }
     });
     let jobs = opts.jobs.max(1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());

@@ -15,12 +15,13 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use super::Artifacts;
 use super::{Protocol, ProtocolRow};
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
 use crate::pipeline::stage::{DegradationLevel, Metrics, Params, Typed};
 use crate::stats::pearson;
-use crate::store::{Manifest, Store};
+use crate::store::Manifest;
 
 const SIZE: (u32, u32) = (960, 640);
 const FONT: &str = "sans-serif";
@@ -399,10 +400,9 @@ struct Group {
     runs: Runs,
 }
 
-fn typed(store: &Store, key: &str) -> Option<(Manifest, Typed)> {
-    let m = store.check(key).ok()?;
-    let t = Typed::of(&m).ok()?;
-    Some((m, t))
+fn typed<'a>(store: &'a Artifacts, key: &str) -> Option<(&'a Manifest, Typed)> {
+    let m = store.get(key)?;
+    Some((m, Typed::of(m).ok()?))
 }
 
 fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
@@ -415,9 +415,9 @@ fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
 }
 
 /// Writes every figure into `dir`; returns what it wrote, for the markdown to link.
-pub fn write(store: &Store, protocols: &[ProtocolRow], dir: &Path) -> Result<Vec<Written>> {
+pub fn write(store: &Artifacts, protocols: &[ProtocolRow], dir: &Path) -> Result<Vec<Written>> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
-    for m in store.manifests()? {
+    for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }

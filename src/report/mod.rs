@@ -16,7 +16,7 @@ use crate::pipeline::Method;
 use crate::pipeline::stage::eval::CheckpointEval;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::stats::{ReturnStats, bootstrap_ci, spearman};
-use crate::store::Store;
+use crate::store::{Manifest, Store};
 
 /// Which policy of each PPO run a figure is measured on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -186,14 +186,34 @@ pub fn over_checkpoints(checkpoints: &[CheckpointEval]) -> f64 {
     spearman(&learned, &truth)
 }
 
-fn collect(store: &Store) -> Result<Long> {
+/// The store's intact artifacts, read and verified once: every table, note and figure of a
+/// report comes from this one pass (verifying re-hashes every output file).
+pub struct Artifacts {
+    by_key: BTreeMap<String, Manifest>,
+}
+
+impl Artifacts {
+    pub fn read(store: &Store) -> Result<Self> {
+        Ok(Artifacts { by_key: store.manifests()?.into_iter().map(|m| (m.key.clone(), m)).collect() })
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = &Manifest> {
+        self.by_key.values()
+    }
+
+    pub fn get(&self, key: &str) -> Option<&Manifest> {
+        self.by_key.get(key)
+    }
+}
+
+fn collect(store: &Artifacts) -> Result<Long> {
     let (mut env, mut method, mut pipeline, mut run, mut ret) = (vec![], vec![], vec![], vec![], vec![]);
     let (mut d_env, mut d_pipeline, mut d_ret) = (vec![], vec![], vec![]);
     let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
     let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, String, String), Vec<RunEval>> = BTreeMap::new();
-    for m in store.manifests()? {
+    for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
@@ -231,8 +251,8 @@ fn collect(store: &Store) -> Result<Long> {
         // The demonstrations this evaluation was compared with (once per demos artifact).
         if let Some(dk) = m.inputs.get("demos")
             && demo_keys.insert((e.clone(), p.pipeline.clone(), dk.clone()))
-            && let Ok(dm) = store.check(dk)
-            && let Ok(Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. }) = Typed::of(&dm)
+            && let Some(dm) = store.get(dk)
+            && let Ok(Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. }) = Typed::of(dm)
         {
             for &r in &d.returns {
                 d_env.push(e.clone());
@@ -275,7 +295,7 @@ pub struct Tables {
     pub accuracy: DataFrame,
 }
 
-pub fn build(store: &Store) -> Result<Tables> {
+pub fn build(store: &Artifacts) -> Result<Tables> {
     let mut long = collect(store)?;
     let mut protocols = Vec::new();
     for ((env, pipeline, method), runs) in &mut long.runs {
@@ -336,18 +356,18 @@ pub fn build(store: &Store) -> Result<Tables> {
 /// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
 /// accuracy, and what multi-BC's clone filter kept (when it keeps none, multi-BC's reward is
 /// trained on D-REX's rankings alone, and its results equal D-REX's).
-pub fn notes(store: &Store) -> Result<String> {
+pub fn notes(store: &Artifacts) -> Result<String> {
     let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
     let mut seen = std::collections::BTreeSet::new();
-    for m in store.manifests()? {
-        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(&m) else { continue };
+    for m in store.iter() {
+        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
         let Some(reward) = m.inputs.get("reward") else { continue };
         if !seen.insert((p.pipeline.clone(), reward.clone())) {
             continue;
         }
-        let Ok(rm) = store.check(reward) else { continue };
+        let Some(rm) = store.get(reward) else { continue };
         let group = lines.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
-        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(&rm) {
+        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(rm) {
             let label = if p.iteration > 2 { format!("{} (k={})", p.method.label(), p.iteration) } else { p.method.label().to_string() };
             group.insert(format!(
                 "{label}: the learned reward ({}) ranks {:.1} % of held-out training pairs correctly; on its training set Pearson {:.2}",
@@ -357,8 +377,8 @@ pub fn notes(store: &Store) -> Result<String> {
             ));
         }
         for (role, key) in &rm.inputs {
-            if let (true, Ok(sm)) = (role.starts_with("set"), store.check(key))
-                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(&sm)
+            if let (true, Some(sm)) = (role.starts_with("set"), store.get(key))
+                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
             {
                 let kept = x.clones.iter().filter(|c| c.kept).count();
                 let mut line = format!(
