@@ -21,7 +21,9 @@ fn a_failed_install_names_the_package_and_keeps_nothing() {
     std::fs::copy(repo("scripts/bootstrap.sh"), dir.join("scripts/bootstrap.sh")).unwrap();
     std::fs::write(dir.join("scripts/requirements.txt"), "no-such-package-for-idrex-tests==9.9.9\n").unwrap();
     let cache = dir.join("cache");
-    let out = Command::new(dir.join("scripts/bootstrap.sh")).env("IDREX_CACHE", &cache).output().unwrap();
+    // Through bash, not exec: a test running in parallel may fork while the copy is still
+    // open for writing, and exec'ing a file open for writing fails (ETXTBSY).
+    let out = Command::new("bash").arg(dir.join("scripts/bootstrap.sh")).env("IDREX_CACHE", &cache).output().unwrap();
     assert!(!out.status.success());
     let err = stderr(&out);
     assert!(err.contains("pip could not install 'no-such-package-for-idrex-tests==9.9.9'"), "{err}");
