@@ -17,9 +17,20 @@ pub use reward::{RewardConfig, RewardEnsemble, RewardNet};
 /// initialisations would interleave on the one global generator and stop being
 /// reproducible. Everything random after initialisation uses our own seeded generators.
 pub fn seeded<T>(seed: u64, f: impl FnOnce() -> T) -> T {
-    static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
     tch::manual_seed(seed as i64);
+    f()
+}
+
+static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Runs `f`, which builds networks whose initial weights are then overwritten (loading a
+/// saved model), under the same lock as [`seeded`]: building draws from libtorch's global
+/// generator, and doing so while another stage initialises would change that stage's
+/// weights. (It did: PPO runs started while a reward was being loaded got different
+/// critics, in 7 of 12 smoke runs against an S3 store, whose timing made the overlap common.)
+pub fn building<T>(f: impl FnOnce() -> T) -> T {
+    let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
     f()
 }
 

@@ -145,7 +145,7 @@ impl ActorCritic {
         {
             return Err(Error::file(&side_path, format!("obs_norm has {} dims, obs_dim is {}", n.dim(), side.config.obs_dim)));
         }
-        let mut p = ActorCritic::new(side.config);
+        let mut p = crate::nn::building(|| ActorCritic::new(side.config));
         load_weights(&[&p.vs], &dir.join(WEIGHTS), &side_path)?;
         p.obs_norm = side.obs_norm;
         p.obs_clip = side.obs_clip;

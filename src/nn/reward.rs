@@ -187,7 +187,7 @@ impl RewardEnsemble {
         if side.format != FORMAT {
             return Err(Error::file(&side_path, format!("format '{}' is not {FORMAT}", side.format)));
         }
-        let mut r = RewardEnsemble::new(side.config);
+        let mut r = crate::nn::building(|| RewardEnsemble::new(side.config));
         load_weights(&r.stores.iter().collect::<Vec<_>>(), &dir.join(WEIGHTS), &side_path)?;
         if side.norms.len() == r.nets.len() {
             r.norms = side.norms;
