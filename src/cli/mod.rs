@@ -5,6 +5,7 @@ mod env;
 mod logs;
 mod pipeline;
 mod report;
+mod stage;
 mod store;
 mod train;
 
@@ -36,6 +37,9 @@ pub enum Command {
     /// Run or inspect a pipeline file.
     #[command(subcommand)]
     Pipeline(pipeline::PipelineCommand),
+    /// Run one stored node definition (what a Slurm job runs).
+    #[command(subcommand)]
+    Stage(stage::StageCommand),
     /// Re-hash every artifact in the store and list the corrupt ones.
     Verify(store::StoreArgs),
     /// Remove artifacts that no given pipeline file references (a dry run unless --yes).
@@ -84,6 +88,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),
+        Command::Stage(cmd) => stage::run(&cmd),
         Command::Verify(args) => store::verify(&args),
         Command::Gc(args) => store::gc(&args),
         Command::Logs(cmd) => logs::run(&cmd),

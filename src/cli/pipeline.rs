@@ -1,4 +1,4 @@
-//! `idrex pipeline run|plan`.
+//! `idrex pipeline run|plan|status`.
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
@@ -6,8 +6,9 @@ use clap::{Args, Subcommand};
 
 use crate::pipeline::graph::{self, PlanFormat};
 use crate::pipeline::runner::{self, Status};
+use crate::pipeline::slurm::{self, NodeState, Submission};
 use crate::pipeline::{Pipeline, expand, plots, stage};
-use crate::store::Store;
+use crate::store::{Location, Store};
 
 #[derive(Debug, Subcommand)]
 pub enum PipelineCommand {
@@ -15,14 +16,35 @@ pub enum PipelineCommand {
     Run(RunArgs),
     /// Print the DAG with each node's key and whether it is stored.
     Plan(PlanArgs),
+    /// Each node's state: stored, queued, running (from Slurm's queue), failed or missing.
+    Status(PlanArgs),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Executor {
+    /// Run the stages here, `--jobs` at a time.
+    Local,
+    /// Submit each missing stage as a Slurm job (with dependencies) and return.
+    Slurm,
 }
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
     pub file: PathBuf,
-    /// Store directory (overrides the pipeline file's `store`).
+    /// Store directory or `s3://bucket/prefix` (overrides the pipeline file's `store`).
     #[arg(long)]
-    pub store: Option<PathBuf>,
+    pub store: Option<String>,
+    #[arg(long, value_enum, default_value_t = Executor::Local)]
+    pub executor: Executor,
+    /// Slurm partition for every job (--executor slurm).
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// An extra sbatch argument for every job, e.g. `--sbatch-arg=--account=rl` (repeatable).
+    #[arg(long = "sbatch-arg", allow_hyphen_values = true)]
+    pub sbatch_args: Vec<String>,
+    /// Where Slurm jobs write their output; must be visible to the compute nodes.
+    #[arg(long, default_value = "slurm-logs")]
+    pub log_dir: PathBuf,
     /// Stages run in parallel (default: the number of cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -37,8 +59,9 @@ pub struct RunArgs {
 #[derive(Debug, Args)]
 pub struct PlanArgs {
     pub file: PathBuf,
+    /// Store directory or `s3://bucket/prefix` (overrides the pipeline file's `store`).
     #[arg(long)]
-    pub store: Option<PathBuf>,
+    pub store: Option<String>,
     #[arg(long, value_enum, default_value_t = PlanFormat::Text)]
     pub format: PlanFormat,
 }
@@ -47,6 +70,7 @@ pub fn run(cmd: &PipelineCommand) -> anyhow::Result<()> {
     match cmd {
         PipelineCommand::Run(args) => pipeline_run(args),
         PipelineCommand::Plan(args) => plan(args),
+        PipelineCommand::Status(args) => status(args),
     }
 }
 
@@ -58,14 +82,97 @@ pub enum StoreAccess {
 }
 
 /// The pipeline file and the store it names (or `store` overrides).
-pub fn load(file: &Path, store: Option<&Path>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
+pub fn load(file: &Path, store: Option<&str>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
     let p = Pipeline::load(file).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let root = store.map_or_else(|| p.store.clone(), Path::to_path_buf);
-    let store = match access {
-        StoreAccess::Read => Store::at(&root),
-        StoreAccess::Write => Store::open(&root).with_context(|| format!("cannot open the store {}", root.display()))?,
+    let location = match store {
+        Some(s) => Location::parse(s)?,
+        None => p.store.clone(),
     };
+    let store = Store::connect(&location, access == StoreAccess::Write).with_context(|| format!("cannot open the store {location}"))?;
     Ok((p, store))
+}
+
+/// The nodes of a study, grouped by environment (one group, unnamed, for a single one).
+fn env_groups<'a, T>(p: &Pipeline, items: &'a [T], name: impl Fn(&T) -> &str) -> Vec<(Option<&'static str>, Vec<&'a T>)> {
+    if !p.is_study() {
+        return vec![(None, items.iter().collect())];
+    }
+    p.envs.iter().map(|e| (Some(e.name()), items.iter().filter(|t| name(t).starts_with(&format!("{}/", e.name()))).collect())).collect()
+}
+
+fn status(args: &PlanArgs) -> anyhow::Result<()> {
+    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
+    let g = expand(&p)?;
+    let keys = g.keys();
+    // Without Slurm, the store alone answers (a claimed node then shows its last job).
+    let queue = match slurm::Queue::read() {
+        Ok(q) => Some(q),
+        Err(e) => {
+            eprintln!("note: {e}; showing the store's view only");
+            None
+        }
+    };
+    let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
+    for (env, nodes) in env_groups(&p, &g.nodes, |n| n.name.as_str()) {
+        if let Some(env) = env {
+            println!("{env}:");
+        }
+        for n in nodes {
+            let key = &keys[&n.name];
+            let state = slurm::node_state(&store, key, queue.as_ref())?;
+            *counts.entry(state.label()).or_default() += 1;
+            let detail = match &state {
+                NodeState::Queued { job, reason } => format!("job {job} ({reason})"),
+                NodeState::Running { job } => format!("job {job}"),
+                NodeState::Failed { job, log } => format!("job {job}; log {}", log.display()),
+                NodeState::Stored | NodeState::Missing => String::new(),
+            };
+            println!("  {:<34} {} {:<8} {detail}", n.name, &key[..12], state.label());
+        }
+    }
+    let summary: Vec<String> = counts.iter().map(|(k, v)| format!("{v} {k}")).collect();
+    println!("{} nodes in {}: {}", g.nodes.len(), store.location(), summary.join(", "));
+    Ok(())
+}
+
+fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Graph) -> anyhow::Result<()> {
+    if !args.force.is_empty() {
+        bail!("--force is not supported with --executor slurm; recompute locally, or remove the artifact with `idrex gc`");
+    }
+    let binary = std::env::current_exe().context("cannot find the idrex binary to submit")?;
+    let opts = slurm::SlurmOptions {
+        partition: args.partition.clone(),
+        sbatch_args: args.sbatch_args.clone(),
+        log_dir: args.log_dir.clone(),
+        binary,
+    };
+    let out = slurm::submit(g, store, &p.spec.slurm, &opts)?;
+    let mut jobs = Vec::new();
+    for (node, key, s) in &out {
+        match s {
+            Submission::Submitted { job } => {
+                println!("submitted {node:<34} {} job {job}", &key[..12]);
+                jobs.push(job.as_str());
+            }
+            Submission::Queued { job } => println!("queued    {node:<34} {} job {job} (already)", &key[..12]),
+            Submission::Stored => {}
+        }
+    }
+    let stored = out.iter().filter(|(_, _, s)| *s == Submission::Stored).count();
+    println!(
+        "{}: {} stages, {} submitted, {} already queued, {stored} stored in {}",
+        p.name,
+        out.len(),
+        jobs.len(),
+        out.len() - jobs.len() - stored,
+        store.location()
+    );
+    println!(
+        "next: `idrex pipeline status {}{}`",
+        args.file.display(),
+        args.store.as_ref().map_or(String::new(), |s| format!(" --store {s}"))
+    );
+    Ok(())
 }
 
 fn plan(args: &PlanArgs) -> anyhow::Result<()> {
@@ -102,6 +209,9 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
 fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Write)?;
     let g = expand(&p)?;
+    if args.executor == Executor::Slurm {
+        return submit(args, &p, &store, &g);
+    }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true };
     let started = std::time::Instant::now();
@@ -115,22 +225,37 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         outcomes.len(),
         count(&|s| matches!(s, Status::Computed { .. })),
         count(&|s| matches!(s, Status::Cached)),
-        store.root().display(),
+        store.location(),
         count(&|s| matches!(s, Status::Failed { .. })),
         count(&|s| matches!(s, Status::Skipped { .. })),
         started.elapsed().as_secs_f64()
     );
-    let rec = args.recording.clone().unwrap_or_else(|| PathBuf::from("recordings").join(format!("{}-{}.rrd", p.name, p.env.name())));
-    if let Some(dir) = rec.parent() {
-        std::fs::create_dir_all(dir).ok();
+    // One recording per environment: each env's nodes under their names within it.
+    let mut recordings = Vec::new();
+    for &env in &p.envs {
+        let rec = match &args.recording {
+            Some(r) if !p.is_study() => r.clone(),
+            Some(r) => r.with_file_name(format!("{}-{}.rrd", r.file_stem().unwrap_or_default().to_string_lossy(), env.name())),
+            None => PathBuf::from("recordings").join(format!("{}-{}.rrd", p.name, env.name())),
+        };
+        if let Some(dir) = rec.parent() {
+            std::fs::create_dir_all(dir).ok();
+        }
+        let sub = crate::pipeline::graph::expand_one(&p.for_env(env))?;
+        let prefix = if p.is_study() { format!("{}/", env.name()) } else { String::new() };
+        let mine: Vec<runner::Outcome> = outcomes
+            .iter()
+            .filter_map(|o| o.node.strip_prefix(&prefix).map(|n| runner::Outcome { node: n.to_string(), ..o.clone() }))
+            .collect();
+        plots::record(&sub, &mine, &store, &rec, &p.name)?;
+        println!("recording: {}", rec.display());
+        recordings.push(rec.display().to_string());
     }
-    plots::record(&g, &outcomes, &store, &rec, &p.name)?;
-    println!("recording: {}", rec.display());
     if failed.is_empty() {
         println!(
             "next: `idrex report --store {}` (tables and figures in report/), `rerun {}` (the plots)",
-            store.root().display(),
-            rec.display()
+            store.location(),
+            recordings.join(" ")
         );
     }
     if !failed.is_empty() {

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 
-use crate::store::Store;
+use crate::store::{Location, Store};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ReportFormat {
@@ -15,8 +15,9 @@ pub enum ReportFormat {
 
 #[derive(Debug, Args)]
 pub struct ReportArgs {
+    /// Artifact store directory or `s3://bucket/prefix`.
     #[arg(long, default_value = "artifacts")]
-    pub store: PathBuf,
+    pub store: String,
     #[arg(long, value_enum, default_value_t = ReportFormat::Both)]
     pub format: ReportFormat,
     #[arg(long, default_value = "report")]
@@ -24,14 +25,16 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    if !args.store.is_dir() {
-        bail!("no store at {}; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store", args.store.display());
+    if let Location::Local(dir) = Location::parse(&args.store)?
+        && !dir.is_dir()
+    {
+        bail!("no store at {}; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store", dir.display());
     }
-    let store = Store::at(&args.store);
+    let store = Store::connect(&Location::parse(&args.store)?, false)?;
     let store = crate::report::Artifacts::read(&store)?;
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
-        bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store.display());
+        bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     if args.format != ReportFormat::Md {

@@ -4,13 +4,24 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::Args;
 
-use crate::store::Store;
+use crate::store::{Location, Store};
+
+/// The store a command names; a local one must exist.
+pub fn existing(text: &str, write: bool) -> anyhow::Result<Store> {
+    let location = Location::parse(text)?;
+    if let Location::Local(dir) = &location
+        && !dir.is_dir()
+    {
+        bail!("no store at {}; give its directory or s3://bucket/prefix with --store", dir.display());
+    }
+    Ok(Store::connect(&location, write)?)
+}
 
 #[derive(Debug, Args)]
 pub struct StoreArgs {
-    /// Artifact store directory.
+    /// Artifact store directory or `s3://bucket/prefix`.
     #[arg(long, default_value = "artifacts")]
-    pub store: PathBuf,
+    pub store: String,
     /// Also recompute N artifacts (all without N) in scratch directories and report any
     /// whose bytes differ from the stored ones.
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "all")]
@@ -21,19 +32,17 @@ pub struct StoreArgs {
 pub struct GcArgs {
     /// Pipeline files whose artifacts are kept.
     pub files: Vec<PathBuf>,
+    /// Artifact store directory or `s3://bucket/prefix`.
     #[arg(long, default_value = "artifacts")]
-    pub store: PathBuf,
+    pub store: String,
     /// Really delete (default: only list what would go).
     #[arg(long)]
     pub yes: bool,
 }
 
 pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
-    if !args.store.is_dir() {
-        bail!("no store at {}; give its directory with --store", args.store.display());
-    }
     // Recomputing stages into the store's .tmp; only checking writes nothing.
-    let store = if args.recompute.is_some() { Store::open(&args.store)? } else { Store::at(&args.store) };
+    let store = existing(&args.store, args.recompute.is_some())?;
     let keys = store.keys()?;
     let bad = store.verify()?;
     for (k, problem) in &bad {
@@ -41,7 +50,7 @@ pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
     }
     println!("{} artifacts, {} corrupt", keys.len(), bad.len());
     if !bad.is_empty() {
-        bail!("{} corrupt artifacts in {}; `idrex pipeline run` recomputes them", bad.len(), args.store.display());
+        bail!("{} corrupt artifacts in {}; `idrex pipeline run` recomputes them", bad.len(), store.location());
     }
     if let Some(n) = &args.recompute {
         let n = match n.as_str() {
@@ -71,10 +80,7 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
     if args.files.is_empty() {
         bail!("name the pipeline files whose artifacts to keep, e.g. `idrex gc pipelines/*.yaml`");
     }
-    if !args.store.is_dir() {
-        bail!("no store at {}; give its directory with --store", args.store.display());
-    }
-    let store = Store::open(&args.store)?;
+    let store = existing(&args.store, true)?;
     let mut keep = std::collections::BTreeSet::new();
     for f in &args.files {
         let (p, _) = super::pipeline::load(f, Some(&args.store), super::pipeline::StoreAccess::Read)?;

@@ -69,8 +69,43 @@ pub struct DemosConfig {
     /// Rollouts of the demonstrator's stochastic policy.
     pub episodes: usize,
     /// Import instead: an MCAP in idrex's rollout schema or an NPZ with obs, actions,
-    /// rewards, episode_lengths; a path relative to the pipeline file.
-    pub from: Option<PathBuf>,
+    /// rewards, episode_lengths; a path relative to the pipeline file, or (for a study over
+    /// several environments) a map from environment to path.
+    pub from: Option<DemosFrom>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum DemosFrom {
+    One(PathBuf),
+    PerEnv(BTreeMap<String, PathBuf>),
+}
+
+impl DemosFrom {
+    /// The file for `env`, relative to the pipeline file.
+    pub fn for_env(&self, env: EnvId) -> Option<&PathBuf> {
+        match self {
+            DemosFrom::One(p) => Some(p),
+            DemosFrom::PerEnv(m) => m.get(env.name()),
+        }
+    }
+}
+
+/// One environment, or a list: a study over several, each expanded with every method and seed.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum Envs {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Envs {
+    pub fn names(&self) -> Vec<&str> {
+        match self {
+            Envs::One(e) => vec![e.as_str()],
+            Envs::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
 }
 
 impl Default for DemosConfig {
@@ -163,10 +198,12 @@ pub struct PipelineFile {
     /// Names the pipeline in reports (default: the file name).
     #[serde(default)]
     pub name: Option<String>,
-    pub env: String,
-    /// Store directory, relative to the pipeline file (default: ./artifacts of the cwd).
+    /// An environment, or a list of them (a study).
+    pub env: Envs,
+    /// Store directory, relative to the pipeline file (default: ./artifacts of the cwd), or
+    /// an S3 URL `s3://bucket/prefix`.
     #[serde(default)]
-    pub store: Option<PathBuf>,
+    pub store: Option<String>,
     /// One RL run per seed (R = len).
     #[serde(default = "default_seeds")]
     pub seeds: Vec<u64>,
@@ -195,6 +232,50 @@ pub struct PipelineFile {
     pub idrex: IdrexConfig,
     #[serde(default)]
     pub overrides: BTreeMap<Method, MethodOverrides>,
+    /// What each stage asks Slurm for (`--executor slurm`); not part of any key.
+    #[serde(default)]
+    pub slurm: SlurmConfig,
+}
+
+/// A Slurm job's resources; unset fields fall back to `slurm.default`, then to the
+/// cluster's defaults.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Resources {
+    /// `--cpus-per-task`; also the stage's thread budget.
+    pub cpus: Option<u32>,
+    /// `--mem`, e.g. `4G`.
+    pub mem: Option<String>,
+    /// `--time`, e.g. `2:00:00`.
+    pub time: Option<String>,
+    /// `--gres=gpu:N`.
+    pub gpus: Option<u32>,
+}
+
+impl Resources {
+    /// `self`, with `base` filling what it leaves unset.
+    pub fn or(&self, base: &Resources) -> Resources {
+        Resources {
+            cpus: self.cpus.or(base.cpus),
+            mem: self.mem.clone().or_else(|| base.mem.clone()),
+            time: self.time.clone().or_else(|| base.time.clone()),
+            gpus: self.gpus.or(base.gpus),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SlurmConfig {
+    pub default: Resources,
+    /// Per stage kind (`trex`, `ppo`, `bc`, `eval`, `noise-rollouts`, ...).
+    pub stages: BTreeMap<crate::pipeline::stage::StageKind, Resources>,
+}
+
+impl SlurmConfig {
+    pub fn for_kind(&self, kind: crate::pipeline::stage::StageKind) -> Resources {
+        self.stages.get(&kind).map_or_else(|| self.default.clone(), |r| r.or(&self.default))
+    }
 }
 
 fn default_seeds() -> Vec<u64> {
@@ -233,8 +314,11 @@ impl std::fmt::Display for ConfigError {
 pub struct Pipeline {
     pub file: PathBuf,
     pub name: String,
+    /// The environment this pipeline runs on (the first of a study's; see [`Pipeline::for_env`]).
     pub env: EnvId,
-    pub store: PathBuf,
+    /// Every environment of the file, in its order.
+    pub envs: Vec<EnvId>,
+    pub store: crate::store::Location,
     pub spec: PipelineFile,
     /// The reward PPO optimises on a learned ensemble.
     pub composition: Composition,
@@ -309,14 +393,21 @@ impl Pipeline {
         if spec.version != SCHEMA_VERSION {
             bad(&["version"], format!("schema version {} is not supported; write `version: {SCHEMA_VERSION}`", spec.version));
         }
-        let env: Option<EnvId> = match spec.env.parse() {
-            Ok(e) => Some(e),
-            Err(e) => {
-                let e: crate::Error = e;
-                bad(&["env"], format!("{e}; write e.g. `env: Hopper-v5`"));
-                None
+        let mut envs: Vec<EnvId> = Vec::new();
+        for name in spec.env.names() {
+            match name.parse() {
+                Ok(e) if envs.contains(&e) => bad(&["env"], format!("env lists {name} twice; list each environment once")),
+                Ok(e) => envs.push(e),
+                Err(e) => {
+                    let e: crate::Error = e;
+                    bad(&["env"], format!("{e}; write e.g. `env: Hopper-v5`"));
+                }
             }
-        };
+        }
+        if spec.env.names().is_empty() {
+            bad(&["env"], "env is an empty list; name at least one environment, e.g. `env: [Hopper-v5]`".into());
+        }
+        let env: Option<EnvId> = (envs.len() == spec.env.names().len()).then(|| envs.first().copied()).flatten();
         if spec.seeds.is_empty() {
             bad(&["seeds"], "seeds is empty; give at least one seed, e.g. `seeds: [0, 1, 2]`".into());
         }
@@ -388,20 +479,36 @@ impl Pipeline {
             bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
         }
         let base = path.parent().unwrap_or(Path::new("."));
-        let store = spec.store.as_ref().map_or_else(|| PathBuf::from("artifacts"), |s| base.join(s));
+        let store = match &spec.store {
+            None => crate::store::Location::Local(PathBuf::from("artifacts")),
+            Some(s) => match crate::store::Location::parse(s) {
+                Ok(l) => l.relative_to(base),
+                Err(e) => {
+                    bad(&["store"], e.to_string());
+                    crate::store::Location::Local(PathBuf::from("artifacts"))
+                }
+            },
+        };
         let name = spec.name.clone().unwrap_or_else(|| path.file_stem().map_or("pipeline".into(), |s| s.to_string_lossy().into_owned()));
-        if let Some(from) = &spec.demos.from {
+        if let Some(DemosFrom::PerEnv(m)) = &spec.demos.from {
+            for e in m.keys().filter(|e| !envs.iter().any(|x| x.name() == e.as_str())) {
+                bad(&["demos", "from"], format!("demos.from names {e}, which is not in env; remove it or add it to env"));
+            }
+        }
+        for &e in spec.demos.from.as_ref().map_or(&[][..], |_| &envs[..]) {
+            let Some(from) = spec.demos.from.as_ref().and_then(|f| f.for_env(e)) else {
+                bad(&["demos", "from"], format!("demos.from has no file for {}; add `{}: PATH` under it", e.name(), e.name()));
+                continue;
+            };
             let p = base.join(from);
             if !p.is_file() {
                 bad(
                     &["demos", "from"],
                     format!("demonstration file {} does not exist (the path is relative to the pipeline file)", p.display()),
                 );
-            } else if let Some(env) = env
-                && let Err(e) = crate::pipeline::stage::demos::load(&p, env)
-            {
+            } else if let Err(err) = crate::pipeline::stage::demos::load(&p, e) {
                 // Bad data is refused now, before any stage runs.
-                bad(&["demos", "from"], format!("demonstration file {e}"));
+                bad(&["demos", "from"], format!("demonstration file {err}"));
             }
         }
         let (Some(env), true) = (env, problems.is_empty()) else {
@@ -411,7 +518,19 @@ impl Pipeline {
         };
         let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
-        Ok(Pipeline { file: path.into(), name, env, store, spec, composition })
+        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition })
+    }
+
+    /// This pipeline on one of its environments (with that environment's defaults).
+    pub fn for_env(&self, env: EnvId) -> Pipeline {
+        let ctrl_coeff = self.spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
+        Pipeline { env, composition: Composition { ctrl_coeff, ..self.composition.clone() }, ..self.clone() }
+    }
+
+    /// Whether the file is a study over several environments (node names then start with
+    /// the environment's).
+    pub fn is_study(&self) -> bool {
+        self.envs.len() > 1
     }
 
     /// The pipeline file's directory, against which relative paths resolve.

@@ -109,14 +109,33 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .collect()
 }
 
-/// Expands a validated pipeline into its DAG.
+/// Expands a validated pipeline into its DAG. A study (several environments) is the union
+/// of each environment's graph, its node names prefixed with the environment's name
+/// (`Hopper-v5/drex/ppo/0`).
 pub fn expand(p: &Pipeline) -> crate::Result<Graph> {
+    if !p.is_study() {
+        return expand_one(p);
+    }
+    let mut g = Graph::default();
+    for &env in &p.envs {
+        let sub = expand_one(&p.for_env(env))?;
+        let prefix = |n: &str| format!("{}/{n}", env.name());
+        for n in sub.nodes {
+            let inputs = n.inputs.iter().map(|(role, src)| (role.clone(), prefix(src))).collect();
+            g.push(prefix(&n.name), n.params, n.seed, inputs);
+        }
+    }
+    Ok(g)
+}
+
+/// The graph of one environment's pipeline.
+pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
     let s = &p.spec;
     let env = p.env;
     let mut g = Graph::default();
     let seed0 = s.seeds[0];
     let wants = |m: Method| s.methods.contains(&m);
-    let demos = match &s.demos.from {
+    let demos = match s.demos.from.as_ref().and_then(|f| f.for_env(env)) {
         Some(from) => {
             let path = p.base_dir().join(from);
             let (sha256, _) = store::sha256_file(&path)?;
@@ -256,6 +275,52 @@ mod tests {
         let p = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
         let (a, b) = (expand(&p(BASE)).unwrap().keys(), expand(&p(&format!("{BASE}{extra}"))).unwrap().keys());
         a.keys().filter(|n| a[*n] != b[*n]).cloned().collect()
+    }
+
+    #[test]
+    fn a_study_is_each_environments_graph_under_its_name() {
+        let parse = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text);
+        let one = expand(&parse(BASE).unwrap()).unwrap();
+        let walker = expand(&parse(&BASE.replace("Hopper-v5", "Walker2d-v5")).unwrap()).unwrap();
+        let study = parse(&BASE.replace("env: Hopper-v5", "env: [Hopper-v5, Walker2d-v5]")).unwrap();
+        assert!(study.is_study());
+        let g = expand(&study).unwrap();
+        assert_eq!(g.nodes.len(), one.nodes.len() + walker.nodes.len());
+        // The same computations, so the same keys: a study shares artifacts with the
+        // single-environment files (and a store with their runs).
+        let keys = g.keys();
+        for (single, env) in [(&one, "Hopper-v5"), (&walker, "Walker2d-v5")] {
+            for (name, key) in single.keys() {
+                assert_eq!(keys[&format!("{env}/{name}")], key, "{env}/{name}");
+            }
+        }
+        let ppo = g.get("Walker2d-v5/drex/ppo/0").unwrap();
+        assert_eq!(ppo.inputs, vec![("reward".to_string(), "Walker2d-v5/drex/trex".to_string())]);
+        // Each environment keeps its own defaults (the control-cost weight differs).
+        assert_ne!(study.for_env(crate::env::EnvId::HalfCheetah).composition, study.composition);
+
+        let err = |text: &str| parse(text).unwrap_err().to_string();
+        assert!(err(&BASE.replace("env: Hopper-v5", "env: [Hopper-v5, Hopper-v5]")).contains("lists Hopper-v5 twice"));
+        assert!(err(&BASE.replace("env: Hopper-v5", "env: []")).contains("empty list"));
+        let dir = std::env::temp_dir().join(format!("idrex-study-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let missing = format!("{}demos:\n  from:\n    Hopper-v5: h.npz\n", BASE.replace("env: Hopper-v5", "env: [Hopper-v5, Walker2d-v5]"));
+        let e = Pipeline::parse(&dir.join("p.yaml"), &missing).unwrap_err().to_string();
+        assert!(e.contains("demos.from has no file for Walker2d-v5"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn slurm_resources_per_stage_kind_fall_back_to_the_default() {
+        let text = format!("{BASE}slurm:\n  default: {{cpus: 1, mem: 2G}}\n  stages:\n    trex: {{cpus: 2, time: \"1:00:00\"}}\n");
+        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &text).unwrap();
+        let trex = p.spec.slurm.for_kind(StageKind::Trex);
+        assert_eq!((trex.cpus, trex.mem.as_deref(), trex.time.as_deref()), (Some(2), Some("2G"), Some("1:00:00")));
+        assert_eq!(p.spec.slurm.for_kind(StageKind::Ppo).cpus, Some(1));
+        // Resources are not part of any key.
+        assert_eq!(expand(&p).unwrap().keys(), expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap().keys());
+        let bad = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}slurm:\n  stages:\n    gail: {{cpus: 2}}\n"));
+        assert!(bad.unwrap_err().to_string().contains("unknown variant `gail`"));
     }
 
     #[test]

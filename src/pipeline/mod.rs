@@ -9,6 +9,7 @@ pub mod plots;
 pub mod recompute;
 pub mod runner;
 pub mod schedule;
+pub mod slurm;
 pub mod stage;
 
 pub use config::{Method, Pipeline};

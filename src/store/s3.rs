@@ -1,0 +1,309 @@
+//! The S3-compatible backend of the store (`--store s3://bucket/prefix`).
+//!
+//! Layout under the prefix:
+//!
+//! ```text
+//! blobs/<sha256>                 every output file, named by its content
+//! artifacts/<key>/manifest.json  the commit point: written last, create-if-absent
+//! defs/<key>.json                a node as submitted (for `idrex stage run KEY`)
+//! claims/<key>/<n>.json          who was sent to compute a node (Slurm job ids)
+//! ```
+//!
+//! Blobs go up first (overwriting one is harmless: same name, same bytes), each checked
+//! afterwards by its size; then the manifest is put with `If-None-Match: *`. A racer that
+//! loses finds the winner's manifest and discards its own copy, so two machines computing a
+//! node at once is wasted work, never a conflict, and no lock is needed. A reader trusts a
+//! manifest only when every blob it names exists with its recorded size, and checks each
+//! blob's sha256 when it downloads it (S3 stores have accepted truncated uploads).
+//!
+//! Endpoint, region and credentials come from the standard AWS environment variables
+//! (`AWS_ENDPOINT_URL`, `AWS_REGION`, `AWS_ACCESS_KEY_ID`, `AWS_SECRET_ACCESS_KEY`, ...);
+//! they never enter a manifest, a log line or an error message.
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use futures::TryStreamExt;
+use object_store::aws::AmazonS3Builder;
+use object_store::path::Path as ObjectPath;
+use object_store::{ObjectStore, ObjectStoreExt, PutMode, PutPayload};
+use sha2::{Digest, Sha256};
+
+use super::{MANIFEST, Manifest, hex};
+use crate::error::{Error, Result};
+
+/// A bucket and a prefix in it, with a connection.
+pub struct Remote {
+    store: Arc<dyn ObjectStore>,
+    /// `s3://bucket/prefix`, for messages.
+    pub url: String,
+    endpoint: String,
+    prefix: String,
+    rt: tokio::runtime::Runtime,
+}
+
+impl std::fmt::Debug for Remote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Remote({})", self.url)
+    }
+}
+
+/// Whether a put created the object or found it there already.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Created {
+    Yes,
+    AlreadyThere,
+}
+
+impl Remote {
+    pub fn connect(bucket: &str, prefix: &str) -> Result<Remote> {
+        let url = if prefix.is_empty() { format!("s3://{bucket}") } else { format!("s3://{bucket}/{prefix}") };
+        let mut builder = AmazonS3Builder::from_env().with_bucket_name(bucket);
+        let endpoint = std::env::var("AWS_ENDPOINT_URL_S3")
+            .or_else(|_| std::env::var("AWS_ENDPOINT_URL"))
+            .or_else(|_| std::env::var("AWS_ENDPOINT"))
+            .unwrap_or_else(|_| "the AWS default endpoint".into());
+        // A plain-HTTP endpoint is a deliberate choice (a test server, a cluster-internal
+        // gateway); object_store refuses it unless told.
+        let allow_http = endpoint.starts_with("http://") || std::env::var("AWS_ALLOW_HTTP").is_ok_and(|v| v == "true");
+        if std::env::var_os("AWS_REGION").is_none() && std::env::var_os("AWS_DEFAULT_REGION").is_none() {
+            builder = builder.with_region("us-east-1");
+        }
+        // Fail within seconds when the endpoint is unreachable instead of retrying for minutes.
+        let retry = object_store::RetryConfig {
+            max_retries: 3,
+            retry_timeout: Duration::from_secs(20),
+            backoff: object_store::BackoffConfig::default(),
+        };
+        let options = object_store::ClientOptions::new()
+            .with_allow_http(allow_http)
+            .with_connect_timeout(Duration::from_secs(5))
+            .with_timeout(Duration::from_secs(300));
+        let store =
+            builder.with_retry(retry).with_client_options(options).build().map_err(|e| Error::Invalid(format!("{url}: {}", clean(&e))))?;
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("idrex-s3")
+            .enable_all()
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start the S3 client's runtime: {e}")))?;
+        Ok(Remote { store: Arc::new(store), url, endpoint, prefix: prefix.trim_matches('/').to_string(), rt })
+    }
+
+    fn path(&self, rel: &str) -> ObjectPath {
+        ObjectPath::from(if self.prefix.is_empty() { rel.to_string() } else { format!("{}/{rel}", self.prefix) })
+    }
+
+    /// One line for an object_store error: what went wrong and what to check.
+    fn err(&self, what: &str, e: object_store::Error) -> Error {
+        let text = clean(&e);
+        let hint = if ["SignatureDoesNotMatch", "InvalidAccessKeyId", "AccessDenied", "Forbidden", "403"].iter().any(|s| text.contains(s)) {
+            "the server refused the credentials: check AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY".to_string()
+        } else if ["error sending request", "connect", "Connection refused", "timed out", "dns"].iter().any(|s| text.contains(s)) {
+            format!("cannot reach {}: check AWS_ENDPOINT_URL and that the server is up", self.endpoint)
+        } else if text.contains("NoSuchBucket") {
+            "no such bucket: create it, or fix the bucket in the store URL".to_string()
+        } else {
+            text
+        };
+        Error::Invalid(format!("{} {what}: {hint}", self.url))
+    }
+
+    fn block<F: std::future::Future>(&self, f: F) -> F::Output {
+        self.rt.block_on(f)
+    }
+
+    pub fn get(&self, rel: &str) -> Result<Option<Vec<u8>>> {
+        let p = self.path(rel);
+        self.block(async {
+            match self.store.get(&p).await {
+                Ok(r) => r.bytes().await.map(|b| Some(b.to_vec())),
+                Err(object_store::Error::NotFound { .. }) => Ok(None),
+                Err(e) => Err(e),
+            }
+        })
+        .map_err(|e| self.err(&format!("reading {rel}"), e))
+    }
+
+    /// The size of an object, or None when it does not exist.
+    pub fn size(&self, rel: &str) -> Result<Option<u64>> {
+        let p = self.path(rel);
+        match self.block(self.store.head(&p)) {
+            Ok(m) => Ok(Some(m.size)),
+            Err(object_store::Error::NotFound { .. }) => Ok(None),
+            Err(e) => Err(self.err(&format!("checking {rel}"), e)),
+        }
+    }
+
+    pub fn put(&self, rel: &str, bytes: Vec<u8>) -> Result<()> {
+        let p = self.path(rel);
+        self.block(self.store.put(&p, PutPayload::from(bytes))).map(|_| ()).map_err(|e| self.err(&format!("writing {rel}"), e))
+    }
+
+    /// Puts `bytes` only if nothing is at `rel` (S3 `If-None-Match: *`).
+    pub fn create(&self, rel: &str, bytes: Vec<u8>) -> Result<Created> {
+        let p = self.path(rel);
+        match self.block(self.store.put_opts(&p, PutPayload::from(bytes), PutMode::Create.into())) {
+            Ok(_) => Ok(Created::Yes),
+            Err(object_store::Error::AlreadyExists { .. } | object_store::Error::Precondition { .. }) => Ok(Created::AlreadyThere),
+            Err(e) => Err(self.err(&format!("creating {rel}"), e)),
+        }
+    }
+
+    pub fn delete(&self, rel: &str) -> Result<()> {
+        let p = self.path(rel);
+        match self.block(self.store.delete(&p)) {
+            Ok(()) | Err(object_store::Error::NotFound { .. }) => Ok(()),
+            Err(e) => Err(self.err(&format!("deleting {rel}"), e)),
+        }
+    }
+
+    /// Every object under `rel/`: (path relative to `rel/`, size, last modified as unix seconds).
+    pub fn list(&self, rel: &str) -> Result<Vec<(String, u64, i64)>> {
+        let p = self.path(rel);
+        let metas: Vec<object_store::ObjectMeta> =
+            self.block(self.store.list(Some(&p)).try_collect()).map_err(|e| self.err(&format!("listing {rel}"), e))?;
+        let base = format!("{}/", p.as_ref());
+        Ok(metas
+            .into_iter()
+            .filter_map(|m| {
+                let name = m.location.as_ref().strip_prefix(&base)?.to_string();
+                Some((name, m.size, m.last_modified.timestamp()))
+            })
+            .collect())
+    }
+
+    fn manifest_path(key: &str) -> String {
+        format!("artifacts/{key}/{MANIFEST}")
+    }
+
+    pub fn blob_path(sha256: &str) -> String {
+        format!("blobs/{sha256}")
+    }
+
+    /// The manifest of `key` as written, without looking at its blobs.
+    pub fn manifest(&self, key: &str) -> Result<Option<Manifest>> {
+        let Some(bytes) = self.get(&Self::manifest_path(key))? else { return Ok(None) };
+        serde_json::from_slice(&bytes).map(Some).map_err(|e| Error::Invalid(format!("{} artifacts/{key}/{MANIFEST}: {e}", self.url)))
+    }
+
+    /// The manifest of `key` if every blob it names exists with its size; the error says what
+    /// is missing. `Ok(None)` when there is no manifest.
+    pub fn check(&self, key: &str) -> Result<Option<std::result::Result<Manifest, String>>> {
+        let Some(m) = self.manifest(key)? else { return Ok(None) };
+        if m.key != key {
+            return Ok(Some(Err(format!("{MANIFEST} names key {}", m.key))));
+        }
+        for o in &m.outputs {
+            match self.size(&Self::blob_path(&o.sha256))? {
+                Some(size) if size == o.size => {}
+                Some(size) => return Ok(Some(Err(format!("{}: blob has {size} bytes, the manifest says {}", o.path, o.size)))),
+                None => return Ok(Some(Err(format!("{}: blob {} is missing", o.path, &o.sha256[..12])))),
+            }
+        }
+        Ok(Some(Ok(m)))
+    }
+
+    /// Downloads every output of `m` into `dir`, checking each blob's sha256 and size.
+    pub fn download(&self, m: &Manifest, dir: &Path) -> Result<()> {
+        for o in &m.outputs {
+            let bytes = self.get(&Self::blob_path(&o.sha256))?.ok_or_else(|| {
+                Error::Invalid(format!("{}: artifact {} names blob {} ({}), which is missing", self.url, m.key, o.sha256, o.path))
+            })?;
+            if bytes.len() as u64 != o.size || hex(&Sha256::digest(&bytes)) != o.sha256 {
+                return Err(Error::Invalid(format!("{}: blob {} ({} of {}) does not match its digest", self.url, o.sha256, o.path, m.key)));
+            }
+            let to = dir.join(&o.path);
+            if let Some(parent) = to.parent() {
+                std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            }
+            std::fs::write(&to, &bytes).map_err(|e| Error::io(&to, e))?;
+        }
+        Ok(())
+    }
+
+    /// The problem with a blob's bytes, if any (verify downloads and hashes every blob).
+    pub fn blob_problem(&self, sha256: &str, size: u64) -> Result<Option<String>> {
+        Ok(match self.get(&Self::blob_path(sha256))? {
+            None => Some(format!("blob {} is missing", &sha256[..12])),
+            Some(b) if b.len() as u64 != size => Some(format!("blob {} has {} bytes, not {size}", &sha256[..12], b.len())),
+            Some(b) if hex(&Sha256::digest(&b)) != sha256 => Some(format!("blob {} does not match its digest", &sha256[..12])),
+            Some(_) => None,
+        })
+    }
+
+    /// Uploads a published local artifact: blobs first, each checked by size afterwards, then
+    /// the manifest as the commit point. Returns whether this call committed it
+    /// ([`Created::AlreadyThere`]: someone else did first, and theirs stands). With `replace`
+    /// (a forced recomputation, or a stored manifest whose blobs are gone) the manifest is
+    /// overwritten.
+    pub fn push(&self, dir: &Path, m: &Manifest, replace: bool) -> Result<Created> {
+        for o in &m.outputs {
+            let rel = Self::blob_path(&o.sha256);
+            if self.size(&rel)? == Some(o.size) {
+                continue; // content-addressed: already there
+            }
+            let f = dir.join(&o.path);
+            let bytes = std::fs::read(&f).map_err(|e| Error::io(&f, e))?;
+            self.put(&rel, bytes)?;
+            match self.size(&rel)? {
+                Some(s) if s == o.size => {}
+                got => {
+                    return Err(Error::Invalid(format!(
+                        "{}: uploading {} of {} left {:?} bytes, not {}; nothing was committed",
+                        self.url, o.path, m.key, got, o.size
+                    )));
+                }
+            }
+        }
+        let text = serde_json::to_string_pretty(m).expect("a manifest serialises") + "\n";
+        let rel = Self::manifest_path(&m.key);
+        if replace {
+            self.put(&rel, text.into_bytes())?;
+            return Ok(Created::Yes);
+        }
+        self.create(&rel, text.into_bytes())
+    }
+
+    /// Every key with a manifest.
+    pub fn keys(&self) -> Result<Vec<String>> {
+        let mut keys: Vec<String> = self
+            .list("artifacts")?
+            .into_iter()
+            .filter_map(|(name, _, _)| name.strip_suffix(&format!("/{MANIFEST}")).map(str::to_string))
+            .collect();
+        keys.sort();
+        keys.dedup();
+        Ok(keys)
+    }
+
+    pub fn delete_artifact(&self, key: &str) -> Result<()> {
+        self.delete(&Self::manifest_path(key))?;
+        self.delete(&format!("defs/{key}.json"))?;
+        for (name, _, _) in self.list(&format!("claims/{key}"))? {
+            self.delete(&format!("claims/{key}/{name}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// An object_store error's text without the request details it sometimes carries (which can
+/// include signed URLs), on one line.
+fn clean(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        let t = s.to_string();
+        if !text.contains(&t) {
+            text = format!("{text}: {t}");
+        }
+        source = s.source();
+    }
+    let text = text.replace('\n', " ");
+    // Signed query strings never belong in output.
+    let text = match text.find("X-Amz-") {
+        Some(i) => format!("{}…", &text[..i]),
+        None => text,
+    };
+    text.chars().take(300).collect()
+}
