@@ -102,6 +102,7 @@ fn env_groups<'a, T>(p: &Pipeline, items: &'a [T], name: impl Fn(&T) -> &str) ->
 
 fn status(args: &PlanArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
+    store.index()?;
     let g = expand(&p)?;
     let keys = g.keys();
     // Without Slurm, the store alone answers (a claimed node then shows its last job).
@@ -146,6 +147,7 @@ fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Grap
         log_dir: args.log_dir.clone(),
         binary,
     };
+    store.index()?;
     let out = slurm::submit(g, store, &p.spec.slurm, &opts)?;
     let mut jobs = Vec::new();
     for (node, key, s) in &out {
@@ -177,6 +179,7 @@ fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Grap
 
 fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
+    store.index()?;
     let g = expand(&p)?;
     let stored = |k: &str| store.check(k).is_ok();
     let keys = g.keys();

@@ -273,6 +273,15 @@ impl Store {
         }
     }
 
+    /// Before checking many artifacts of an S3 store: one listing of its blobs instead of a
+    /// request per file. (A local store needs nothing.)
+    pub fn index(&self) -> Result<()> {
+        match &self.remote {
+            Some(r) => r.index_blobs(),
+            None => Ok(()),
+        }
+    }
+
     pub fn remote(&self) -> Option<&s3::Remote> {
         self.remote.as_deref()
     }
@@ -548,6 +557,7 @@ impl Store {
 
     /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
     pub fn manifests(&self) -> Result<Vec<Manifest>> {
+        self.index()?;
         Ok(self.keys()?.iter().filter_map(|k| self.check(k).ok()).collect())
     }
 

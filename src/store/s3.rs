@@ -40,6 +40,9 @@ pub struct Remote {
     endpoint: String,
     prefix: String,
     rt: tokio::runtime::Runtime,
+    /// Blob sizes from one listing, when a command checks many artifacts
+    /// ([`Remote::index_blobs`]); a blob it lacks is still asked about directly.
+    blob_index: std::sync::Mutex<Option<std::collections::HashMap<String, u64>>>,
 }
 
 impl std::fmt::Debug for Remote {
@@ -87,7 +90,14 @@ impl Remote {
             .enable_all()
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start the S3 client's runtime: {e}")))?;
-        Ok(Remote { store: Arc::new(store), url, endpoint, prefix: prefix.trim_matches('/').to_string(), rt })
+        Ok(Remote {
+            store: Arc::new(store),
+            url,
+            endpoint,
+            prefix: prefix.trim_matches('/').to_string(),
+            rt,
+            blob_index: std::sync::Mutex::new(None),
+        })
     }
 
     fn path(&self, rel: &str) -> ObjectPath {
@@ -195,6 +205,10 @@ impl Remote {
             return Ok(Some(Err(format!("{MANIFEST} names key {}", m.key))));
         }
         for o in &m.outputs {
+            let listed = self.blob_index.lock().unwrap_or_else(|e| e.into_inner()).as_ref().and_then(|i| i.get(&o.sha256).copied());
+            if listed == Some(o.size) {
+                continue;
+            }
             match self.size(&Self::blob_path(&o.sha256))? {
                 Some(size) if size == o.size => {}
                 Some(size) => return Ok(Some(Err(format!("{}: blob has {size} bytes, the manifest says {}", o.path, o.size)))),
@@ -202,6 +216,14 @@ impl Remote {
             }
         }
         Ok(Some(Ok(m)))
+    }
+
+    /// Lists every blob once, so that checking many artifacts (status, report, submission)
+    /// costs a listing instead of a request per file: a PPO run alone has about 100 files.
+    pub fn index_blobs(&self) -> Result<()> {
+        let index = self.list("blobs")?.into_iter().map(|(sha, size, _)| (sha, size)).collect();
+        *self.blob_index.lock().unwrap_or_else(|e| e.into_inner()) = Some(index);
+        Ok(())
     }
 
     /// Downloads every output of `m` into `dir`, checking each blob's sha256 and size.
