@@ -220,7 +220,15 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() {
         assert!(!err.contains(SECRET) && !err.contains("wrong-secret"), "a secret in the message: {err}");
     }
 
-    // gc on the bucket keeps what a pipeline names.
+    // gc on the bucket keeps what a pipeline names and removes the rest; what stays is intact.
     let gc = ok(idrex(&base, &["gc", smoke, "--store", &s3("a"), "--yes"]));
     assert!(gc.contains("0 artifacts removed"), "{gc}");
+    let one_seed = base.join("one-seed.yaml");
+    std::fs::write(&one_seed, std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap().replace("seeds: [0, 1]", "seeds: [0]"))
+        .unwrap();
+    let gc = ok(idrex(&base, &["gc", one_seed.to_str().unwrap(), "--store", &s3("a"), "--yes"]));
+    let removed: usize = gc.lines().last().unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    assert!(removed > 0 && removed < 28, "{gc}");
+    let verified = ok(idrex(&base, &["verify", "--store", &s3("a")]));
+    assert!(verified.contains(&format!("{} artifacts, 0 corrupt", 28 - removed)), "{verified}");
 }
