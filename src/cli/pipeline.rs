@@ -184,6 +184,13 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     let stored = |k: &str| store.check(k).is_ok();
     let keys = g.keys();
     print!("{}", graph::render(&g, &keys, &stored, args.format));
+    if args.format == PlanFormat::Text && p.is_study() {
+        println!();
+        for (env, nodes) in env_groups(&p, &g.nodes, |n| n.name.as_str()) {
+            let done = nodes.iter().filter(|n| stored(&keys[&n.name])).count();
+            println!("{}: {} nodes, {done} stored", env.unwrap_or_default(), nodes.len());
+        }
+    }
     if args.format == PlanFormat::Text {
         // What is left, estimated from the store's own stage times (see pipeline::schedule).
         let est = crate::pipeline::schedule::Estimates::from_manifests(&store.unverified_manifests().unwrap_or_default());
