@@ -18,11 +18,11 @@ s3_port="${IDREX_S3_PORT:-8333}"
 die() { echo "services: $*" >&2; exit 1; }
 
 install() {
-  if ! command -v slurmctld >/dev/null || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null; then
-    [ "$(id -u)" = 0 ] || die "Slurm is not installed and this is not root; install slurmctld slurmd slurm-client munge"
+  if ! command -v slurmctld >/dev/null || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null || ! command -v curl >/dev/null; then
+    [ "$(id -u)" = 0 ] || die "Slurm is not installed and this is not root; install slurmctld slurmd slurm-client munge curl"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq >/dev/null
-    apt-get install -y -qq --no-install-recommends slurmctld slurmd slurm-client munge >/dev/null
+    apt-get install -y -qq --no-install-recommends slurmctld slurmd slurm-client munge curl >/dev/null
   fi
   if [ ! -f "$weed_env/.complete" ]; then
     rm -rf "$weed_env"
@@ -102,6 +102,10 @@ CONF
       </dev/null >"$dir/weed.log" 2>&1) &
   echo $! >"$dir/weed.pid"
   wait_for 30 "SeaweedFS's S3 port" bash -c "exec 3<>/dev/tcp/127.0.0.1/$s3_port"
+  # The bucket appears up to a second after the port opens (a bucket is a directory of the
+  # filer, which answers unauthenticated on loopback).
+  wait_for 30 "the idrex bucket" bash -c \
+    "curl -sf -H 'Accept: application/json' http://127.0.0.1:8888/buckets/ | grep -q '\"/buckets/idrex\"'"
 }
 
 stop() {
