@@ -45,7 +45,7 @@ start() {
   command -v slurmctld >/dev/null || die "Slurm is not installed; run scripts/services.sh install"
   # Another cluster or S3 server here would answer in place of ours: refuse instead.
   local port
-  for port in 6817 6818 "$s3_port"; do
+  for port in 6817 6818 "$s3_port" 8888 9333; do
     if (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null; then
       die "port $port is in use (a Slurm daemon or S3 server already running?); stop it first"
     fi
@@ -60,6 +60,7 @@ start() {
     [ -f /etc/munge/munge.key ] || die "/etc/munge/munge.key is missing; reinstall munge"
     runuser -u munge -- /usr/sbin/munged --pid-file=/run/munge/munged.pid
     wait_for 5 munged munge -n
+    touch "$dir/munged.ours"  # started here, so stopped here
   fi
 
   cat >"$dir/slurm.conf" <<CONF
@@ -109,17 +110,28 @@ CONF
 }
 
 stop() {
-  local dir="$1" pid
+  local dir="$1" pid pids=()
   # This cluster's jobs first (only ours: the controller named by this configuration).
   SLURM_CONF="$dir/slurm.conf" scancel --user="$(id -un)" 2>/dev/null && sleep 1 || true
-  for f in slurmd slurmctld; do
-    pid="$(cat "$dir/$f.pid" 2>/dev/null)" && kill "$pid" 2>/dev/null || true
+  for f in slurmd:slurmd slurmctld:slurmctld weed:weed munged:munged; do
+    # A pid file is trusted only while its process is the program it names (a stale file
+    # must not kill whatever got the number since).
+    local name="${f%%:*}" prog="${f##*:}" file="$dir/${f%%:*}.pid"
+    [ "$name" = munged ] && { [ -f "$dir/munged.ours" ] || continue; file=/run/munge/munged.pid; }
+    pid="$(cat "$file" 2>/dev/null)" || continue
+    case "$(basename "$(readlink "/proc/$pid/exe" 2>/dev/null)")" in "$prog"*) ;; *) continue ;; esac  # Debian: slurmd-wlm
+    # weed takes 12-20 s to finish on SIGTERM and keeps nothing we need: it is killed.
+    if [ "$name" = weed ]; then kill -KILL "$pid" 2>/dev/null; else kill "$pid" 2>/dev/null; fi
+    pids+=("$pid")
   done
-  if pid="$(cat "$dir/weed.pid" 2>/dev/null)"; then
-    # weed takes 12-20 s to finish on SIGTERM; nothing of it needs keeping.
-    pkill -KILL -P "$pid" 2>/dev/null || true
-    kill -KILL "$pid" 2>/dev/null || true
-  fi
+  # Gone before returning, so that a new start finds the ports free.
+  for _ in $(seq 100); do
+    local alive=0
+    for pid in "${pids[@]}"; do kill -0 "$pid" 2>/dev/null && [ "$(cut -d' ' -f3 "/proc/$pid/stat" 2>/dev/null)" != Z ] && alive=1; done
+    [ "$alive" = 0 ] && return 0
+    sleep 0.1
+  done
+  echo "services: some daemons under $dir did not stop within 10 s" >&2
 }
 
 case "${1:-}" in

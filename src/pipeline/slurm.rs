@@ -162,6 +162,12 @@ fn state_and_attempt(store: &Store, key: &str, queue: Option<&Queue>) -> Result<
     };
     let Some(queue) = queue else { return Ok((NodeState::Queued { job: claim.job, reason: "squeue unavailable".into() }, attempt)) };
     let state = match queue.state(&claim.job)? {
+        // Held past the moment between claim and release: its submitter died there.
+        Some(JobState::Pending { reason })
+            if reason.starts_with("JobHeld") && crate::store::now_unix() - claim.submitted_unix > HELD_GRACE_S =>
+        {
+            NodeState::Failed { job: claim.job, log: claim.log }
+        }
         Some(JobState::Running) => NodeState::Running { job: claim.job },
         Some(JobState::Pending { reason }) => NodeState::Queued { job: claim.job, reason },
         Some(JobState::Other(s)) => NodeState::Queued { job: claim.job, reason: s },
@@ -171,6 +177,10 @@ fn state_and_attempt(store: &Store, key: &str, queue: Option<&Queue>) -> Result<
     };
     Ok((state, attempt))
 }
+
+/// How long a claimed job may stay held before it counts as abandoned (a submitter holds
+/// it for the milliseconds between `sbatch` and `scontrol release`).
+const HELD_GRACE_S: f64 = 60.0;
 
 /// What submission did with a node.
 #[derive(Debug, Clone, PartialEq)]
@@ -254,7 +264,11 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
     let log_dir = std::path::absolute(&opts.log_dir).map_err(|e| Error::io(&opts.log_dir, e))?;
     let queue = Queue::read()?;
     let keys = graph.keys();
-    let store_url = store.location();
+    // The jobs may start elsewhere: a local store is named by its absolute path.
+    let store_url = match store.remote() {
+        Some(_) => store.location(),
+        None => std::path::absolute(store.root()).map_err(|e| Error::io(store.root(), e))?.display().to_string(),
+    };
     let mut done: BTreeMap<String, Submission> = BTreeMap::new();
     let mut out = Vec::new();
     for n in &graph.nodes {
@@ -264,6 +278,10 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
             NodeState::Stored => Submission::Stored,
             NodeState::Queued { job, .. } | NodeState::Running { job } => Submission::Queued { job },
             NodeState::Failed { .. } | NodeState::Missing => {
+                if let NodeState::Failed { job, .. } = &state {
+                    // An abandoned held job would otherwise sit in the queue forever.
+                    let _ = Command::new("scancel").arg(job).output();
+                }
                 let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
                 store.put_def(&NodeDef {
                     key: key.clone(),
@@ -285,18 +303,25 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
                     submitted_unix: crate::store::now_unix(),
                 };
                 let text = serde_json::to_string(&claim).expect("a claim serialises");
-                match store.claim(key, attempt, &text)? {
-                    Created::Yes => {
-                        run(Command::new("scontrol").args(["release", &job]), "scontrol release")?;
-                        Submission::Submitted { job }
-                    }
-                    Created::AlreadyThere => {
-                        // Another submission claimed this attempt first: ours never runs.
-                        run(Command::new("scancel").arg(&job), "scancel")?;
-                        match last_claim(store, key)? {
-                            Some((_, Some(c))) => Submission::Queued { job: c.job },
-                            _ => return Err(Error::Invalid(format!("node {}: its claim in {store_url} is unreadable", n.name))),
-                        }
+                // The job is held until claimed: on any failure from here it is cancelled, so
+                // that no held job is left that nothing points to (or that a claim names
+                // but nobody releases).
+                let cancel = || {
+                    let _ = Command::new("scancel").arg(&job).output();
+                };
+                let claimed = store.claim(key, attempt, &text).inspect_err(|_| cancel())?;
+                // A create whose response was lost and was retried reads as taken: by us.
+                let ours =
+                    claimed == Created::Yes || matches!(last_claim(store, key), Ok(Some((n, Some(c)))) if n == attempt && c.job == job);
+                if ours {
+                    run(Command::new("scontrol").args(["release", &job]), "scontrol release").inspect_err(|_| cancel())?;
+                    Submission::Submitted { job }
+                } else {
+                    // Another submission claimed this attempt first: ours never runs.
+                    cancel();
+                    match last_claim(store, key)? {
+                        Some((_, Some(c))) => Submission::Queued { job: c.job },
+                        _ => return Err(Error::Invalid(format!("node {}: its claim in {store_url} is unreadable", n.name))),
                     }
                 }
             }

@@ -317,7 +317,9 @@ impl Store {
     }
 
     pub fn lock_or_wait(&self, key: &str, waiting: &mut dyn FnMut(&str)) -> Result<KeyLock> {
-        let path = self.root.join(".locks").join(format!("{key}.lock"));
+        let locks = self.root.join(".locks");
+        std::fs::create_dir_all(&locks).map_err(|e| Error::io(&locks, e))?; // a cache may be deleted under a run
+        let path = locks.join(format!("{key}.lock"));
         let file = File::options().create(true).truncate(false).read(true).write(true).open(&path).map_err(|e| Error::io(&path, e))?;
         if file.try_lock().is_err() {
             let who = std::fs::read_to_string(&path).unwrap_or_default();
@@ -415,7 +417,9 @@ impl Store {
     /// A fresh, empty staging directory for `key`, owned until the [`Staging`] is dropped.
     pub fn stage(&self, key: &str) -> Result<Staging> {
         let n = STAGING_COUNTER.fetch_add(1, Ordering::Relaxed);
-        let dir = self.root.join(".tmp").join(format!("{key}.{}.{n}", std::process::id()));
+        let tmp = self.root.join(".tmp");
+        std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let dir = tmp.join(format!("{key}.{}.{n}", std::process::id()));
         let lock = lock_path(&dir);
         let owner = File::options().create(true).truncate(false).write(true).open(&lock).map_err(|e| Error::io(&lock, e))?;
         owner.lock().map_err(|e| Error::io(&lock, e))?;
@@ -456,7 +460,18 @@ impl Store {
             let local = self.local_check(&key).map_err(|p| Error::Invalid(format!("cached artifact {key}: {p}")))?;
             if r.push(&dir, &local, replace)? == s3::Created::AlreadyThere {
                 match r.check(&key)? {
-                    Some(Ok(_)) => tracing::info!("{key} was published to {} by another run first; keeping theirs", r.url),
+                    Some(Ok(theirs)) if theirs.outputs == local.outputs => {
+                        tracing::info!("{key} was published to {} by another run first; keeping theirs", r.url)
+                    }
+                    Some(Ok(_)) => {
+                        // Same key, other bytes: a stage whose outputs are not a function of
+                        // its key. The store's copy stands; ours must not feed this machine.
+                        tracing::warn!(
+                            "{key} was published to {} by another run with different bytes (outputs that do not depend on the key alone); keeping theirs",
+                            r.url
+                        );
+                        self.quarantine(&key)?;
+                    }
                     // A manifest whose blobs are gone: ours replaces it.
                     _ => {
                         r.push(&dir, &local, true)?;
@@ -490,10 +505,10 @@ impl Store {
         };
         let staging = self.stage(key)?;
         r.download(&m, &staging.dir)?;
-        let got = self.local_publish(staging, m.clone(), false)?;
-        if got.outputs != m.outputs {
-            return Err(Error::Invalid(format!("artifact {key} from {} has files its manifest does not list", r.url)));
+        if hash_outputs(&staging.dir)? != m.outputs {
+            return Err(Error::Invalid(format!("artifact {key} from {} does not match its manifest once downloaded", r.url)));
         }
+        self.local_publish(staging, m, false)?;
         Ok(dir)
     }
 
@@ -557,7 +572,17 @@ impl Store {
 
     /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
     pub fn manifests(&self) -> Result<Vec<Manifest>> {
-        self.index()?;
+        if let Some(r) = &self.remote {
+            // A store that cannot be asked is an error, not an empty table.
+            r.index_blobs()?;
+            let mut out = Vec::new();
+            for k in r.keys()? {
+                if let Some(Ok(m)) = r.check(&k)? {
+                    out.push(m);
+                }
+            }
+            return Ok(out);
+        }
         Ok(self.keys()?.iter().filter_map(|k| self.check(k).ok()).collect())
     }
 
@@ -589,7 +614,7 @@ impl Store {
     /// (or, with `dry_run`, would be) removed.
     pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
         if let Some(r) = &self.remote {
-            return Self::remote_gc(r, keep, dry_run);
+            return self.remote_gc(r, keep, dry_run);
         }
         let _alone = if dry_run { None } else { Some(self.exclusive()?) };
         let mut removed = Vec::new();
@@ -612,14 +637,22 @@ impl Store {
     /// Manifests first, then the blobs no remaining manifest names. A blob younger than an
     /// hour stays: it may belong to an upload whose manifest is not committed yet (there is
     /// no lock across machines, so gc cannot see a run elsewhere).
-    fn remote_gc(r: &s3::Remote, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+    fn remote_gc(&self, r: &s3::Remote, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
         let keys = r.keys()?;
         let removed: Vec<String> = keys.iter().filter(|k| !keep.contains(*k)).cloned().collect();
         if dry_run {
             return Ok(removed);
         }
+        // Runs on this machine, at least, are seen (through the cache's use lock).
+        let _alone = self.exclusive()?;
         for k in &removed {
             r.delete_artifact(k)?;
+        }
+        // Definitions and claims of nodes never computed (failed jobs), unless still named.
+        for k in r.submitted()? {
+            if !keep.contains(&k) && !keys.contains(&k) {
+                r.delete_submission(&k)?;
+            }
         }
         let mut referenced = std::collections::BTreeSet::new();
         for k in keys.iter().filter(|k| keep.contains(*k)) {
@@ -663,8 +696,14 @@ impl Store {
                 let dir = self.root.join(".claims").join(key);
                 std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
                 let path = dir.join(n.to_string());
-                match File::options().write(true).create_new(true).open(&path) {
-                    Ok(mut f) => f.write_all(who.as_bytes()).map(|_| s3::Created::Yes).map_err(|e| Error::io(&path, e)),
+                // Written whole to the side, then linked into place: link fails if the name
+                // exists, and a reader never sees a claim half-written.
+                let tmp = dir.join(format!(".{n}.{}.{}", std::process::id(), STAGING_COUNTER.fetch_add(1, Ordering::Relaxed)));
+                std::fs::write(&tmp, who).map_err(|e| Error::io(&tmp, e))?;
+                let linked = std::fs::hard_link(&tmp, &path);
+                let _ = std::fs::remove_file(&tmp);
+                match linked {
+                    Ok(()) => Ok(s3::Created::Yes),
                     Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(s3::Created::AlreadyThere),
                     Err(e) => Err(Error::io(&path, e)),
                 }

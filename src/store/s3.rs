@@ -198,11 +198,20 @@ impl Remote {
     }
 
     /// The manifest of `key` if every blob it names exists with its size; the error says what
-    /// is missing. `Ok(None)` when there is no manifest.
+    /// is missing or wrong (an unreadable manifest, a bad digest or path: the artifact is
+    /// then recomputed like a missing one). `Ok(None)` when there is no manifest; `Err` only
+    /// when the store cannot be asked.
     pub fn check(&self, key: &str) -> Result<Option<std::result::Result<Manifest, String>>> {
-        let Some(m) = self.manifest(key)? else { return Ok(None) };
+        let Some(bytes) = self.get(&Self::manifest_path(key))? else { return Ok(None) };
+        let m: Manifest = match serde_json::from_slice(&bytes) {
+            Ok(m) => m,
+            Err(e) => return Ok(Some(Err(format!("{MANIFEST} is unreadable: {e}")))),
+        };
         if m.key != key {
             return Ok(Some(Err(format!("{MANIFEST} names key {}", m.key))));
+        }
+        if let Some(problem) = m.outputs.iter().find_map(output_problem) {
+            return Ok(Some(Err(problem)));
         }
         for o in &m.outputs {
             let listed = self.blob_index.lock().unwrap_or_else(|e| e.into_inner()).as_ref().and_then(|i| i.get(&o.sha256).copied());
@@ -228,6 +237,9 @@ impl Remote {
 
     /// Downloads every output of `m` into `dir`, checking each blob's sha256 and size.
     pub fn download(&self, m: &Manifest, dir: &Path) -> Result<()> {
+        if let Some(problem) = m.outputs.iter().find_map(output_problem) {
+            return Err(Error::Invalid(format!("{}: artifact {}: {problem}", self.url, m.key)));
+        }
         for o in &m.outputs {
             let bytes = self.get(&Self::blob_path(&o.sha256))?.ok_or_else(|| {
                 Error::Invalid(format!("{}: artifact {} names blob {} ({}), which is missing", self.url, m.key, o.sha256, o.path))
@@ -280,11 +292,24 @@ impl Remote {
         }
         let text = serde_json::to_string_pretty(m).expect("a manifest serialises") + "\n";
         let rel = Self::manifest_path(&m.key);
-        if replace {
+        let created = if replace {
             self.put(&rel, text.into_bytes())?;
-            return Ok(Created::Yes);
+            Created::Yes
+        } else {
+            self.create(&rel, text.into_bytes())?
+        };
+        if created == Created::Yes {
+            // A blob found already there may have been old and unreferenced, and removed by a
+            // concurrent gc since: put back whatever the committed manifest lacks.
+            for o in &m.outputs {
+                let rel = Self::blob_path(&o.sha256);
+                if self.size(&rel)? != Some(o.size) {
+                    let f = dir.join(&o.path);
+                    self.put(&rel, std::fs::read(&f).map_err(|e| Error::io(&f, e))?)?;
+                }
+            }
         }
-        self.create(&rel, text.into_bytes())
+        Ok(created)
     }
 
     /// Every key with a manifest.
@@ -301,11 +326,34 @@ impl Remote {
 
     pub fn delete_artifact(&self, key: &str) -> Result<()> {
         self.delete(&Self::manifest_path(key))?;
+        self.delete_submission(key)
+    }
+
+    /// A node's definition and claims.
+    pub fn delete_submission(&self, key: &str) -> Result<()> {
         self.delete(&format!("defs/{key}.json"))?;
         for (name, _, _) in self.list(&format!("claims/{key}"))? {
             self.delete(&format!("claims/{key}/{name}"))?;
         }
         Ok(())
+    }
+
+    /// Keys with a stored definition (submitted nodes, computed or not).
+    pub fn submitted(&self) -> Result<Vec<String>> {
+        Ok(self.list("defs")?.into_iter().filter_map(|(name, _, _)| name.strip_suffix(".json").map(str::to_string)).collect())
+    }
+}
+
+/// What is wrong with a manifest's output entry, if anything: its digest must be 64 hex
+/// digits and its path relative, without `..` (it is joined to a local directory).
+fn output_problem(o: &super::OutputFile) -> Option<String> {
+    let path = Path::new(&o.path);
+    if o.sha256.len() != 64 || !o.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
+        Some(format!("{}: '{}' is not a sha256", o.path, o.sha256))
+    } else if o.path.is_empty() || path.is_absolute() || path.components().any(|c| !matches!(c, std::path::Component::Normal(_))) {
+        Some(format!("output path '{}' is not a plain relative path", o.path))
+    } else {
+        None
     }
 }
 
