@@ -251,8 +251,8 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         if let Some(dir) = rec.parent() {
             std::fs::create_dir_all(dir).ok();
         }
-        let sub = crate::pipeline::graph::expand_one(&p.for_env(env))?;
         let prefix = if p.is_study() { format!("{}/", env.name()) } else { String::new() };
+        let sub = g.subgraph(&prefix);
         let mine: Vec<runner::Outcome> = outcomes
             .iter()
             .filter_map(|o| o.node.strip_prefix(&prefix).map(|n| runner::Outcome { node: n.to_string(), ..o.clone() }))

@@ -4,8 +4,6 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 
-use crate::store::{Location, Store};
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ReportFormat {
     Csv,
@@ -25,12 +23,8 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    if let Location::Local(dir) = Location::parse(&args.store)?
-        && !dir.is_dir()
-    {
-        bail!("no store at {}; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store", dir.display());
-    }
-    let store = Store::connect(&Location::parse(&args.store)?, false)?;
+    let store =
+        super::store::existing(&args.store, false, "run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store")?;
     let store = crate::report::Artifacts::read(&store)?;
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {

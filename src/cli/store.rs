@@ -6,13 +6,15 @@ use clap::Args;
 
 use crate::store::{Location, Store};
 
-/// The store a command names; a local one must exist.
-pub fn existing(text: &str, write: bool) -> anyhow::Result<Store> {
+const GIVE_STORE: &str = "give its directory or s3://bucket/prefix with --store";
+
+/// The store a command names; a local one must exist (else the error ends with `hint`).
+pub fn existing(text: &str, write: bool, hint: &str) -> anyhow::Result<Store> {
     let location = Location::parse(text)?;
     if let Location::Local(dir) = &location
         && !dir.is_dir()
     {
-        bail!("no store at {}; give its directory or s3://bucket/prefix with --store", dir.display());
+        bail!("no store at {}; {hint}", dir.display());
     }
     Ok(Store::connect(&location, write)?)
 }
@@ -42,7 +44,7 @@ pub struct GcArgs {
 
 pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
     // Recomputing stages into the store's .tmp; only checking writes nothing.
-    let store = existing(&args.store, args.recompute.is_some())?;
+    let store = existing(&args.store, args.recompute.is_some(), GIVE_STORE)?;
     let keys = store.keys()?;
     let bad = store.verify()?;
     for (k, problem) in &bad {
@@ -80,7 +82,7 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
     if args.files.is_empty() {
         bail!("name the pipeline files whose artifacts to keep, e.g. `idrex gc pipelines/*.yaml`");
     }
-    let store = existing(&args.store, true)?;
+    let store = existing(&args.store, true, GIVE_STORE)?;
     let mut keep = std::collections::BTreeSet::new();
     for f in &args.files {
         let (p, _) = super::pipeline::load(f, Some(&args.store), super::pipeline::StoreAccess::Read)?;

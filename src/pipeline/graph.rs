@@ -60,6 +60,21 @@ impl Graph {
         keys
     }
 
+    /// The nodes whose names start with `prefix` (a study's environment, `Hopper-v5/`), under
+    /// their names without it: that environment's graph as [`expand_one`] builds it.
+    pub fn subgraph(&self, prefix: &str) -> Graph {
+        let strip = |n: &str| n.strip_prefix(prefix).map(str::to_string);
+        let nodes = self
+            .nodes
+            .iter()
+            .filter_map(|n| {
+                let inputs = n.inputs.iter().map(|(role, src)| Some((role.clone(), strip(src)?))).collect::<Option<_>>()?;
+                Some(Node { name: strip(&n.name)?, params: n.params.clone(), seed: n.seed, inputs })
+            })
+            .collect();
+        Graph { nodes }
+    }
+
     /// The nodes that (transitively) depend on `name`, including itself.
     pub fn descendants(&self, name: &str) -> Vec<String> {
         let mut out = vec![name.to_string()];
@@ -294,6 +309,7 @@ mod tests {
                 assert_eq!(keys[&format!("{env}/{name}")], key, "{env}/{name}");
             }
         }
+        assert_eq!(g.subgraph("Walker2d-v5/").nodes, walker.nodes);
         let ppo = g.get("Walker2d-v5/drex/ppo/0").unwrap();
         assert_eq!(ppo.inputs, vec![("reward".to_string(), "Walker2d-v5/drex/trex".to_string())]);
         // Each environment keeps its own defaults (the control-cost weight differs).

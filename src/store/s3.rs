@@ -241,12 +241,9 @@ impl Remote {
             return Err(Error::Invalid(format!("{}: artifact {}: {problem}", self.url, m.key)));
         }
         for o in &m.outputs {
-            let bytes = self.get(&Self::blob_path(&o.sha256))?.ok_or_else(|| {
-                Error::Invalid(format!("{}: artifact {} names blob {} ({}), which is missing", self.url, m.key, o.sha256, o.path))
-            })?;
-            if bytes.len() as u64 != o.size || hex(&Sha256::digest(&bytes)) != o.sha256 {
-                return Err(Error::Invalid(format!("{}: blob {} ({} of {}) does not match its digest", self.url, o.sha256, o.path, m.key)));
-            }
+            let bytes = self
+                .fetch_blob(&o.sha256, o.size)?
+                .map_err(|problem| Error::Invalid(format!("{}: artifact {}, {}: {problem}", self.url, m.key, o.path)))?;
             let to = dir.join(&o.path);
             if let Some(parent) = to.parent() {
                 std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
@@ -256,14 +253,20 @@ impl Remote {
         Ok(())
     }
 
+    /// A blob's bytes once checked against its size and digest, or what is wrong with it.
+    fn fetch_blob(&self, sha256: &str, size: u64) -> Result<std::result::Result<Vec<u8>, String>> {
+        let short = &sha256[..sha256.len().min(12)];
+        Ok(match self.get(&Self::blob_path(sha256))? {
+            None => Err(format!("blob {short} is missing")),
+            Some(b) if b.len() as u64 != size => Err(format!("blob {short} has {} bytes, not {size}", b.len())),
+            Some(b) if hex(&Sha256::digest(&b)) != sha256 => Err(format!("blob {short} does not match its digest")),
+            Some(b) => Ok(b),
+        })
+    }
+
     /// The problem with a blob's bytes, if any (verify downloads and hashes every blob).
     pub fn blob_problem(&self, sha256: &str, size: u64) -> Result<Option<String>> {
-        Ok(match self.get(&Self::blob_path(sha256))? {
-            None => Some(format!("blob {} is missing", &sha256[..12])),
-            Some(b) if b.len() as u64 != size => Some(format!("blob {} has {} bytes, not {size}", &sha256[..12], b.len())),
-            Some(b) if hex(&Sha256::digest(&b)) != sha256 => Some(format!("blob {} does not match its digest", &sha256[..12])),
-            Some(_) => None,
-        })
+        Ok(self.fetch_blob(sha256, size)?.err())
     }
 
     /// Uploads a published local artifact: blobs first, each checked by size afterwards, then
