@@ -321,7 +321,7 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     use crate::algo::{bc, trex};
     let threads = args.threads.max(1);
     let peak = gemm_gflops(threads);
-    // T-REX: 100 episodes of 1000 steps, 3 members on `threads` workers (each single-threaded).
+    // T-REX: 100 episodes of 1000 steps, 3 members on `threads` workers.
     let trajs = synthetic(100, 1000, 0);
     let ranking = trex::Ranking::by_score(trajs.iter().map(|t| -t.meta.noise).collect());
     crate::nn::single_threaded();
@@ -330,15 +330,13 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         trex::train(&trajs, &ranking, &cfg, 0, threads).map(|_| ()).map_err(Into::into)
     })?;
     let trex_rate = (3 * args.trex_iterations) as f64 / trex_s;
-    // BC: one 1000-step demonstration, with `threads` libtorch threads as the PyTorch side
-    // gets (the pipeline runs it on one).
+    // BC: one 1000-step demonstration, on `threads` threads as the PyTorch side gets (the
+    // pipeline gives it the stage's share of the cores).
     let demo = synthetic(1, 1000, 1);
-    tch::set_num_threads(threads as i32);
     let bc_s = marginal(args.bc_iterations, |n| {
         let cfg = bc::BcConfig { iterations: n, ..Default::default() };
-        bc::train(&demo, &cfg, 0).map(|_| ()).map_err(Into::into)
+        bc::train(&demo, &cfg, 0, threads).map(|_| ()).map_err(Into::into)
     })?;
-    crate::nn::single_threaded();
     let bc_rate = args.bc_iterations as f64 / bc_s;
     let python = args.python.clone().or_else(default_python).filter(|p| p != "none");
     let torch: Option<serde_json::Value> = match &python {

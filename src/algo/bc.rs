@@ -4,10 +4,11 @@
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tch::{Kind, Tensor, nn::OptimizerConfig};
+use tch::{Kind, Tensor};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
+use crate::nn::dense::{Adam, Buf, Dense, LANES, LanePool, Scratch, SequentialBlas, add_into};
 use crate::nn::{ActorCritic, PolicyConfig, WeightInit};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -68,8 +69,20 @@ fn mse(policy: &ActorCritic, x: &Tensor, y: &Tensor) -> Tensor {
     (policy.mean(x) - y).square().sum_dim_intlist(-1, false, Kind::Float).mean(Kind::Float)
 }
 
-/// Trains a deterministic policy on the (s_t, a_t) pairs of `trajs`.
-pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCritic, BcReport)> {
+/// One lane's share of a batch: the rows it gathers, and the gradient of its part of the
+/// loss (summed squared errors x `scale`).
+struct Lane {
+    scratch: Scratch,
+    grads: Buf,
+    x: Buf,
+    y: Vec<f32>,
+    dout: Vec<f32>,
+    sse: f64,
+}
+
+/// Trains a deterministic policy on the (s_t, a_t) pairs of `trajs`, on up to `workers`
+/// threads (the result does not depend on how many: see [`crate::nn::dense`]).
+pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
     if trajs.iter().all(|t| t.is_empty()) {
         return Err(Error::Invalid("behavioural cloning needs at least one demonstration step".into()));
     }
@@ -88,30 +101,69 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<(ActorCr
         }
         Tensor::from_slice(&v).view([rows.len() as i64, d as i64])
     };
-    let (xt, yt) = (gather(train, &x, od), gather(train, &y, ad));
     let mut config = PolicyConfig::bc(od, ad);
     config.hidden = cfg.hidden.clone();
     config.init = cfg.init;
     let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
-    let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
-    let _ftz = crate::nn::FlushDenormals::new();
+    let (_blas, _ftz) = (SequentialBlas::new(), crate::nn::FlushDenormals::new());
+    let mut dense = Dense::from_mlp(&policy.actor);
+    let mut adam = Adam::new(dense.len(), cfg.lr);
+    let mut lanes: Vec<Lane> = (0..LANES)
+        .map(|_| Lane {
+            scratch: Scratch::default(),
+            grads: Buf::zeros(dense.len()),
+            x: Buf::default(),
+            y: Vec::new(),
+            dout: Vec::new(),
+            sse: 0.0,
+        })
+        .collect();
+    let mut grads = Buf::zeros(dense.len());
+    let pool = LanePool::new(workers);
     let nt = train.len();
+    let batch = cfg.batch_size.min(nt);
+    let per_lane = batch.div_ceil(LANES);
+    let scale = 2.0 / batch as f32;
     for it in 0..cfg.iterations {
-        let picks: Vec<i64> = (0..cfg.batch_size.min(nt)).map(|_| rng.random_range(0..nt) as i64).collect();
-        let b = Tensor::from_slice(&picks);
-        let loss = mse(&policy, &xt.index_select(0, &b), &yt.index_select(0, &b)) + cfg.l2 * policy.actor.weight_l2();
-        opt.backward_step(&loss);
+        let picks: Vec<usize> = (0..batch).map(|_| train[rng.random_range(0..nt)]).collect();
+        pool.run(&mut lanes, |lane, k| {
+            let mine = picks.get(k * per_lane..((k + 1) * per_lane).min(batch)).unwrap_or(&[]);
+            lane.grads.fill(0.0);
+            lane.sse = 0.0;
+            lane.x.resize(mine.len() * od);
+            lane.y.clear();
+            for (row, &r) in lane.x.chunks_exact_mut(od).zip(mine) {
+                row.copy_from_slice(&x[r * od..(r + 1) * od]);
+                lane.y.extend_from_slice(&y[r * ad..(r + 1) * ad]);
+            }
+            let pred = dense.forward(&lane.x, mine.len(), &mut lane.scratch);
+            lane.dout.clear();
+            for (p, t) in pred.iter().zip(&lane.y) {
+                lane.sse += ((p - t) as f64).powi(2);
+                // d/dp of (p - t)^2 / batch.
+                lane.dout.push(scale * (p - t));
+            }
+            dense.backward(&lane.x, mine.len(), &lane.dout, &mut lane.scratch, &mut lane.grads);
+        });
+        grads.copy_from_slice(&lanes[0].grads);
+        lanes[1..].iter().for_each(|l| add_into(&mut grads, &l.grads));
         if it % 100 == 0 || it + 1 == cfg.iterations {
-            let l = loss.double_value(&[]);
+            let l = lanes.iter().map(|l| l.sse).sum::<f64>() / batch as f64 + cfg.l2 * dense.weight_l2();
             if !l.is_finite() {
                 return Err(Error::Diverged(format!("BC diverged at iteration {it}: the loss is {l}; lower bc.lr (now {})", cfg.lr)));
             }
         }
+        dense.add_weight_l2(cfg.l2 as f32, &mut grads);
+        adam.step(&mut dense.params, &grads);
     }
+    if dense.params.iter().any(|p| !p.is_finite()) {
+        return Err(Error::Diverged(format!("BC ended with non-finite weights; lower bc.lr (now {})", cfg.lr)));
+    }
+    dense.write_to(&policy.actor);
     let report = tch::no_grad(|| BcReport {
         train_steps: train.len(),
         val_steps: val.len(),
-        train_loss: mse(&policy, &xt, &yt).double_value(&[]),
+        train_loss: mse(&policy, &gather(train, &x, od), &gather(train, &y, ad)).double_value(&[]),
         val_loss: if val.is_empty() { f64::NAN } else { mse(&policy, &gather(val, &x, od), &gather(val, &y, ad)).double_value(&[]) },
     });
     Ok((policy, report))
@@ -139,7 +191,7 @@ mod tests {
         let mut env = Env::new(EnvId::Hopper).unwrap();
         let trajs: Vec<_> = (0..20).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 1500, l2: 0.0, ..Default::default() };
-        let (policy, report) = train(&trajs, &cfg, 0).unwrap();
+        let (policy, report) = train(&trajs, &cfg, 0, 1).unwrap();
         // Actions are in [-1, 1]; predicting 0 would cost about sum of E[a^2], far above this.
         let baseline: f64 = trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
             / trajs.iter().map(|t| t.len()).sum::<usize>() as f64;
@@ -161,9 +213,12 @@ mod tests {
     fn is_deterministic_for_a_seed() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
         let trajs: Vec<_> = (0..2).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
-        let cfg = BcConfig { hidden: vec![32], iterations: 50, ..Default::default() };
-        let (_, a) = train(&trajs, &cfg, 7).unwrap();
-        let (_, b) = train(&trajs, &cfg, 7).unwrap();
+        let cfg = BcConfig { hidden: vec![32], iterations: 50, batch_size: 37, ..Default::default() };
+        let (pa, a) = train(&trajs, &cfg, 7, 1).unwrap();
+        // On two threads, with an odd batch whose lanes are unequal: the same bytes.
+        let (pb, b) = train(&trajs, &cfg, 7, 2).unwrap();
         assert_eq!(a, b);
+        let weights = |p: &ActorCritic| crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec();
+        assert_eq!(weights(&pa), weights(&pb));
     }
 }

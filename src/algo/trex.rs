@@ -9,10 +9,11 @@
 use rand::seq::IndexedRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tch::{Kind, Tensor, nn, nn::Module, nn::OptimizerConfig};
+use tch::nn;
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
+use crate::nn::dense::{Adam, Buf, Dense, LANES, LanePool, Scratch, SequentialBlas, add_into};
 use crate::nn::{RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};
 
@@ -151,57 +152,96 @@ pub fn sample_pairs(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, n
         .collect())
 }
 
-/// Builds the input rows and segment ids (2 per pair) of a batch of pairs.
-fn batch(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool) -> (Tensor, Tensor, Tensor) {
-    let od = trajs[0].obs_dim;
-    let ad = trajs[0].act_dim;
-    let width = od + if action_input { ad } else { 0 };
-    let total: usize = pairs.iter().map(|p| 2 * p.len).sum();
-    let mut rows = Vec::with_capacity(total * width);
-    let mut seg = Vec::with_capacity(total);
-    for (k, p) in pairs.iter().enumerate() {
-        for (side, (ti, start)) in [p.a, p.b].into_iter().enumerate() {
+/// Pairs fed to the network at a time: a chunk's activations (2 x 50 rows per pair x 256
+/// units per layer) then stay in L2.
+const CHUNK_PAIRS: usize = 2;
+
+/// Writes the input rows of `pairs` (each pair's first window, then its second) into `x`;
+/// returns the number of rows.
+fn fill_rows(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool, x: &mut Vec<f32>) -> usize {
+    x.clear();
+    let mut rows = 0;
+    for p in pairs {
+        for (ti, start) in [p.a, p.b] {
             let t = &trajs[ti];
             for s in start..start + p.len {
                 // The reward of step s is paid on s_{s+1}.
-                rows.extend_from_slice(t.obs_row(s + 1));
+                x.extend_from_slice(t.obs_row(s + 1));
                 if action_input {
-                    rows.extend_from_slice(t.action_row(s));
+                    x.extend_from_slice(t.action_row(s));
                 }
-                seg.push((2 * k + side) as i64);
+            }
+            rows += p.len;
+        }
+    }
+    rows
+}
+
+/// One lane's share of a batch: its pairs' summed cross-entropy, how many it ranks right,
+/// and (when training) the gradient of `scale` x that sum.
+struct Lane {
+    scratch: Scratch,
+    grads: Buf,
+    x: Vec<f32>,
+    dout: Vec<f32>,
+    ce: f64,
+    correct: usize,
+}
+
+impl Lane {
+    fn new(params: usize) -> Self {
+        Lane { scratch: Scratch::default(), grads: Buf::zeros(params), x: Vec::new(), dout: Vec::new(), ce: 0.0, correct: 0 }
+    }
+
+    fn run(&mut self, net: &Dense, trajs: &[Trajectory], pairs: &[&Pair], action_input: bool, scale: Option<f32>) {
+        self.grads.fill(0.0);
+        (self.ce, self.correct) = (0.0, 0);
+        for chunk in pairs.chunks(CHUNK_PAIRS) {
+            let rows = fill_rows(trajs, chunk, action_input, &mut self.x);
+            let r = net.forward(&self.x, rows, &mut self.scratch);
+            self.dout.clear();
+            let mut at = 0;
+            for p in chunk {
+                let a: f64 = r[at..at + p.len].iter().map(|&v| v as f64).sum();
+                let b: f64 = r[at + p.len..at + 2 * p.len].iter().map(|&v| v as f64).sum();
+                at += 2 * p.len;
+                // Bradley-Terry: softmax cross-entropy over the two windows' returns.
+                let hi = a.max(b);
+                let lse = hi + ((a - hi).exp() + (b - hi).exp()).ln();
+                self.ce += lse - if p.label == 0 { a } else { b };
+                // As argmax: the first of equal logits wins.
+                self.correct += usize::from((b > a) == (p.label == 1));
+                if let Some(scale) = scale {
+                    let pa = (a - lse).exp();
+                    let da = (pa - if p.label == 0 { 1.0 } else { 0.0 }) as f32 * scale;
+                    self.dout.extend(std::iter::repeat_n(da, p.len));
+                    self.dout.extend(std::iter::repeat_n(-da, p.len));
+                }
+            }
+            if scale.is_some() {
+                net.backward(&self.x, rows, &self.dout, &mut self.scratch, &mut self.grads);
             }
         }
     }
-    let labels: Vec<i64> = pairs.iter().map(|p| p.label).collect();
-    (Tensor::from_slice(&rows).view([total as i64, width as i64]), Tensor::from_slice(&seg), Tensor::from_slice(&labels))
 }
 
-fn logits(net: &RewardNet, x: &Tensor, seg: &Tensor, n_pairs: usize) -> Tensor {
-    let r = net.forward(x).squeeze_dim(-1);
-    Tensor::zeros([2 * n_pairs as i64], (Kind::Float, tch::Device::Cpu)).index_add(0, seg, &r).view([n_pairs as i64, 2])
-}
-
-fn accuracy(net: &RewardNet, trajs: &[Trajectory], pairs: &[Pair], action_input: bool) -> f64 {
+/// The fraction of `pairs` that `net` ranks right.
+fn accuracy(net: &Dense, trajs: &[Trajectory], pairs: &[Pair], action_input: bool, lane: &mut Lane) -> f64 {
     if pairs.is_empty() {
         return f64::NAN;
     }
-    tch::no_grad(|| {
-        let mut correct = 0.0;
-        for chunk in pairs.chunks(256) {
-            let refs: Vec<&Pair> = chunk.iter().collect();
-            let (x, seg, labels) = batch(trajs, &refs, action_input);
-            let pred = logits(net, &x, &seg, chunk.len()).argmax(1, false);
-            correct += pred.eq_tensor(&labels).sum(Kind::Float).double_value(&[]);
-        }
-        correct / pairs.len() as f64
-    })
+    let refs: Vec<&Pair> = pairs.iter().collect();
+    lane.run(net, trajs, &refs, action_input, None);
+    lane.correct as f64 / pairs.len() as f64
 }
 
 /// Trains an ensemble on ranked trajectories; returns it with one report per model.
 ///
-/// The models train concurrently on up to `workers` threads, each model on one thread with
-/// its own generator: the result does not depend on `workers` (libtorch itself must run
-/// single-threaded, see [`crate::nn::single_threaded`]).
+/// Each model trains with its own generator, its batches split into [`LANES`] lanes whose
+/// gradients are summed in order, so the result does not depend on `workers`. With at least
+/// as many workers as models, the models train concurrently (each on `workers / models`
+/// threads, one per lane at most); with fewer, one after another, each on all the workers
+/// (3 models on 2 cores would otherwise leave one core idle a third of the time).
 pub fn train(
     trajs: &[Trajectory],
     ranking: &Ranking,
@@ -222,11 +262,13 @@ pub fn train(
         init: cfg.init,
     };
     let mut model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
-    // Tensors cannot be shared between threads, only moved: each worker owns its models.
-    let workers = workers.clamp(1, cfg.models);
-    let mut owned: Vec<Vec<(usize, nn::VarStore, RewardNet)>> = (0..workers).map(|_| Vec::new()).collect();
+    let workers = workers.max(1);
+    let groups = if workers >= cfg.models { cfg.models } else { 1 };
+    let lane_threads = (workers / groups).clamp(1, LANES);
+    // Tensors cannot be shared between threads, only moved: each group owns its models.
+    let mut owned: Vec<Vec<(usize, nn::VarStore, RewardNet)>> = (0..groups).map(|_| Vec::new()).collect();
     for (m, (store, net)) in model.stores.drain(..).zip(model.nets.drain(..)).enumerate() {
-        owned[m % workers].push((m, store, net));
+        owned[m % groups].push((m, store, net));
     }
     let mut done: Vec<(usize, nn::VarStore, RewardNet, Result<ModelReport>)> = std::thread::scope(|scope| {
         let handles: Vec<_> = owned
@@ -237,7 +279,7 @@ pub fn train(
                     crate::nn::single_threaded();
                     mine.into_iter()
                         .map(|(m, store, net)| {
-                            let report = train_model(&store, &net, m, trajs, ranking, cfg, seed);
+                            let report = train_model(&net, m, trajs, ranking, cfg, seed, lane_threads);
                             (m, store, net, report)
                         })
                         .collect::<Vec<_>>()
@@ -256,54 +298,68 @@ pub fn train(
     Ok((model, reports))
 }
 
-/// Trains model `m` of the ensemble on its own pairs.
+/// Trains model `m` of the ensemble on its own pairs, on `threads` threads.
 fn train_model(
-    store: &nn::VarStore,
     net: &RewardNet,
     m: usize,
     trajs: &[Trajectory],
     ranking: &Ranking,
     cfg: &TrexConfig,
     seed: u64,
+    threads: usize,
 ) -> Result<ModelReport> {
-    {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
-        let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
-        let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
-        let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
-        let mut opt = tch::nn::Adam::default().build(store, cfg.lr)?;
-        let _ftz = crate::nn::FlushDenormals::new();
-        let mut final_loss = f64::NAN;
-        let mut curve = Vec::new();
-        for it in 0..cfg.iterations {
-            let picks: Vec<&Pair> = (0..cfg.batch_size).map(|_| &train[rng.random_range(0..train.len())]).collect();
-            let (x, seg, labels) = batch(trajs, &picks, cfg.action_input);
-            let lg = logits(net, &x, &seg, picks.len());
-            let ce = lg.cross_entropy_for_logits(&labels);
-            let loss = &ce + cfg.l2 * net.weight_l2();
-            opt.backward_step(&loss);
-            final_loss = ce.double_value(&[]);
-            // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
-            if !final_loss.is_finite() || final_loss > 1e3 {
-                return Err(Error::Diverged(format!(
-                    "T-REX model {m} diverged at iteration {it}: the pair loss is {final_loss:.3e}; lower trex.lr (now {})",
-                    cfg.lr
-                )));
-            }
-            if it % 50 == 0 || it + 1 == cfg.iterations {
-                let acc = lg.argmax(1, false).eq_tensor(&labels).to_kind(Kind::Float).mean(Kind::Float).double_value(&[]);
-                curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
-            }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
+    let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
+    let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
+    let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
+    let (_blas, _ftz) = (SequentialBlas::new(), crate::nn::FlushDenormals::new());
+    let mut dense = Dense::from_mlp(net);
+    let mut adam = Adam::new(dense.len(), cfg.lr);
+    let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(dense.len())).collect();
+    let mut grads = Buf::zeros(dense.len());
+    let pool = LanePool::new(threads);
+    let mut final_loss = f64::NAN;
+    let mut curve = Vec::new();
+    for it in 0..cfg.iterations {
+        let picks: Vec<&Pair> = (0..cfg.batch_size).map(|_| &train[rng.random_range(0..train.len())]).collect();
+        let per_lane = picks.len().div_ceil(LANES);
+        // The loss is the mean over the batch's pairs.
+        let scale = 1.0 / picks.len() as f32;
+        pool.run(&mut lanes, |lane, k| {
+            let mine = picks.get(k * per_lane..((k + 1) * per_lane).min(picks.len())).unwrap_or(&[]);
+            lane.run(&dense, trajs, mine, cfg.action_input, Some(scale));
+        });
+        grads.copy_from_slice(&lanes[0].grads);
+        lanes[1..].iter().for_each(|l| add_into(&mut grads, &l.grads));
+        dense.add_weight_l2(cfg.l2 as f32, &mut grads);
+        adam.step(&mut dense.params, &grads);
+        final_loss = lanes.iter().map(|l| l.ce).sum::<f64>() / picks.len() as f64;
+        // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
+        if !final_loss.is_finite() || final_loss > 1e3 {
+            return Err(Error::Diverged(format!(
+                "T-REX model {m} diverged at iteration {it}: the pair loss is {final_loss:.3e}; lower trex.lr (now {})",
+                cfg.lr
+            )));
         }
-        Ok(ModelReport {
-            train_pairs: train.len(),
-            val_pairs: val.len(),
-            final_loss,
-            train_accuracy: accuracy(net, trajs, train, cfg.action_input),
-            val_accuracy: accuracy(net, trajs, val, cfg.action_input),
-            curve,
-        })
+        if it % 50 == 0 || it + 1 == cfg.iterations {
+            // As the loss, of the weights before this iteration's step.
+            let acc = lanes.iter().map(|l| l.correct).sum::<usize>() as f64 / picks.len() as f64;
+            curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
+        }
     }
+    if dense.params.iter().any(|p| !p.is_finite()) {
+        return Err(Error::Diverged(format!("T-REX model {m} has non-finite weights; lower trex.lr (now {})", cfg.lr)));
+    }
+    dense.write_to(net);
+    let lane = &mut lanes[0];
+    Ok(ModelReport {
+        train_pairs: train.len(),
+        val_pairs: val.len(),
+        final_loss,
+        train_accuracy: accuracy(&dense, trajs, train, cfg.action_input, lane),
+        val_accuracy: accuracy(&dense, trajs, val, cfg.action_input, lane),
+        curve,
+    })
 }
 
 #[cfg(test)]
@@ -364,6 +420,34 @@ mod tests {
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
         assert!(spearman(&pred, &truth) > 0.9, "spearman {}", spearman(&pred, &truth));
         assert!(pairwise_accuracy(&pred, &truth) > 0.85);
+    }
+
+    /// Every parameter of every model, flat.
+    fn weights(model: &RewardEnsemble) -> Vec<f32> {
+        model.nets.iter().flat_map(|n| Dense::from_mlp(n).params.to_vec()).collect()
+    }
+
+    #[test]
+    fn does_not_depend_on_the_number_of_workers() {
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let trajs = toy(12, &mut rng);
+        let ranking = Ranking::by_score(trajs.iter().map(|t| t.ret()).collect());
+        // An odd batch, so that the lanes are unequal too.
+        let cfg = TrexConfig {
+            hidden: vec![16, 16],
+            models: 3,
+            pairs_per_model: 200,
+            window: 10,
+            min_margin: 1.0,
+            batch_size: 7,
+            iterations: 40,
+            ..Default::default()
+        };
+        let runs: Vec<_> = [1, 2, 3, 6].into_iter().map(|w| train(&trajs, &ranking, &cfg, 9, w).unwrap()).collect();
+        for (model, reports) in &runs[1..] {
+            assert_eq!(weights(model), weights(&runs[0].0));
+            assert_eq!(reports, &runs[0].1);
+        }
     }
 
     #[test]

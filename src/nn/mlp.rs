@@ -84,6 +84,15 @@ impl Mlp {
         Mlp { layers, activation }
     }
 
+    pub fn activation(&self) -> Activation {
+        self.activation
+    }
+
+    /// Every layer's weight (`out x in`) and bias, in order.
+    pub fn parameters(&self) -> impl Iterator<Item = (&Tensor, &Tensor)> {
+        self.layers.iter().map(|l| (&l.ws, l.bs.as_ref().expect("idrex's linear layers have biases")))
+    }
+
     /// Sum of squared weights (not biases): the L2 term of the BC and T-REX losses.
     pub fn weight_l2(&self) -> Tensor {
         self.layers.iter().map(|l| l.ws.square().sum(tch::Kind::Float)).reduce(|a, b| a + b).expect("an MLP has layers")

@@ -2,6 +2,7 @@
 //! ensembles, and a pure-Rust copy of an MLP for per-step inference in rollouts (one
 //! observation at a time, where libtorch's per-call overhead would dominate).
 pub mod cpu;
+pub mod dense;
 pub mod mlp;
 pub mod policy;
 pub mod reward;

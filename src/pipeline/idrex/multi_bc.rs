@@ -61,7 +61,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
             seed::derive(ctx.seed, Purpose::CloneDemo, r64),
             TrajMeta { source: format!("multi-bc/{r}/demo"), ..Default::default() },
         );
-        let (clone, _) = bc::train(std::slice::from_ref(&demo), &p.bc, seed::derive(ctx.seed, Purpose::CloneTraining, r64))?;
+        let (clone, _) = bc::train(std::slice::from_ref(&demo), &p.bc, seed::derive(ctx.seed, Purpose::CloneTraining, r64), ctx.threads)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r64);
         let trajs = rollout::epsilon_greedy(&mut env, &clone, &p.schedule, p.rollouts_per_level, seed, &meta);

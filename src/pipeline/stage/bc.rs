@@ -14,7 +14,7 @@ pub struct BcParams {
 pub fn run(p: &BcParams, ctx: &StageCtx) -> Result<BcReport> {
     let trajs = read_rollouts(ctx.input("demos")?)?;
     ctx.progress.set_message("behavioural cloning");
-    let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed)?;
+    let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed, ctx.threads)?;
     policy.env = Some(p.env.name().to_string());
     policy.save(&ctx.out.join(POLICY), serde_json::to_value(&p.bc).unwrap_or_default())?;
     Ok(report)

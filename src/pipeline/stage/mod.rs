@@ -144,9 +144,12 @@ fn parse<T: serde::de::DeserializeOwned>(kind: StageKind, what: &str, v: &Value)
 impl StageKind {
     /// Bump when a change to the stage would change its results.
     pub fn version(self) -> u32 {
-        // All at 1. (BC briefly ran on the fused kernel: measured idle, libtorch's GEMMs are
-        // 2.8x faster at 4 x 256 units, so it went back, and with it the version.)
-        1
+        match self {
+            // 2: trained on nn::dense (explicit gradients over MKL's sgemm) instead of
+            // libtorch's autograd, which sums in another order.
+            StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts => 2,
+            _ => 1,
+        }
     }
 
     pub fn parse(name: &str) -> Option<StageKind> {

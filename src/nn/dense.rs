@@ -1,0 +1,511 @@
+//! Training of ReLU MLPs (the BC policy, the T-REX reward nets) with explicit forward and
+//! backward passes over MKL's `sgemm`, the BLAS inside the libtorch idrex already links.
+//!
+//! Why not autograd: at these shapes (256 units, batches of 128 rows for BC and 6,400 for
+//! T-REX) libtorch spends a third to a half of each step outside its matrix products, in
+//! per-operator dispatch, allocation and passes over activations too large for the cache.
+//! Here every product goes straight to `sgemm`, activations live in reused 64-byte-aligned
+//! buffers, and callers feed batches in chunks of a few hundred rows, which stay in L2.
+//!
+//! Results are deterministic: `sgemm` runs sequentially on the calling thread
+//! ([`SequentialBlas`]), buffers are aligned the same way on every run (MKL's code path may
+//! depend on alignment), and callers sum gradients over a fixed partition of the batch
+//! ([`LANES`]) in a fixed order, whatever the number of threads that compute them.
+//! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
+use std::os::raw::{c_char, c_int};
+
+use tch::Tensor;
+
+use super::{Activation, FlushDenormals, Mlp};
+
+/// Every batch is split into this many lanes, whose gradients are summed in lane order; a
+/// lane is the unit of parallelism, so bytes do not depend on how many threads there are.
+pub const LANES: usize = 2;
+
+#[link(name = "torch_cpu")]
+unsafe extern "C" {
+    /// Fortran BLAS (LP64) single-precision matrix product, column-major.
+    fn sgemm_(
+        transa: *const c_char,
+        transb: *const c_char,
+        m: *const c_int,
+        n: *const c_int,
+        k: *const c_int,
+        alpha: *const f32,
+        a: *const f32,
+        lda: *const c_int,
+        b: *const f32,
+        ldb: *const c_int,
+        beta: *const f32,
+        c: *mut f32,
+        ldc: *const c_int,
+    );
+    /// MKL's C interface (by value; the lower-case symbol is the Fortran one, by reference).
+    fn MKL_Set_Num_Threads_Local(n: c_int) -> c_int;
+}
+
+/// While alive, MKL runs sequentially on the calling thread (restored on drop): a product
+/// split over threads would sum in a thread-dependent order and spin against our own threads.
+pub struct SequentialBlas {
+    saved: c_int,
+}
+
+impl SequentialBlas {
+    pub fn new() -> Self {
+        // SAFETY: sets a thread-local MKL setting.
+        SequentialBlas { saved: unsafe { MKL_Set_Num_Threads_Local(1) } }
+    }
+}
+
+impl Default for SequentialBlas {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for SequentialBlas {
+    fn drop(&mut self) {
+        // SAFETY: as above; 0 restores "follow the global setting".
+        unsafe { MKL_Set_Num_Threads_Local(self.saved) };
+    }
+}
+
+/// Row-major `C (m x n) = op(A) op(B) + beta C`, with `op` a transpose where asked, leading
+/// dimensions `lda`, `ldb`, `ldc` (elements between rows).
+#[allow(clippy::too_many_arguments)]
+pub fn gemm(
+    ta: bool,
+    tb: bool,
+    m: usize,
+    n: usize,
+    k: usize,
+    a: &[f32],
+    lda: usize,
+    b: &[f32],
+    ldb: usize,
+    beta: f32,
+    c: &mut [f32],
+    ldc: usize,
+) {
+    if m == 0 || n == 0 {
+        return;
+    }
+    // op(A) is m x k: A is stored m x k (lda >= k) or, transposed, k x m (lda >= m).
+    let (ar, ac) = if ta { (k, m) } else { (m, k) };
+    let (br, bc) = if tb { (n, k) } else { (k, n) };
+    let need = |rows: usize, cols: usize, ld: usize| if rows == 0 { 0 } else { (rows - 1) * ld + cols };
+    assert!(lda >= ac && ldb >= bc && ldc >= n, "gemm: a leading dimension is shorter than its row");
+    assert!(a.len() >= need(ar, ac, lda) && b.len() >= need(br, bc, ldb) && c.len() >= need(m, n, ldc), "gemm: a buffer is too short");
+    let as_int = |x: usize| c_int::try_from(x).expect("gemm dimensions fit in 32 bits");
+    // Row-major C = op(A) op(B) is column-major C' = op(B)' op(A)': swap the operands.
+    let (tb_c, ta_c) = (if tb { b'T' } else { b'N' } as c_char, if ta { b'T' } else { b'N' } as c_char);
+    let (mm, nn, kk, la, lb, lc) = (as_int(n), as_int(m), as_int(k), as_int(ldb), as_int(lda), as_int(ldc));
+    let (one, beta) = (1.0f32, beta);
+    // With k = 0 BLAS does not read A or B, which may then be empty.
+    let (pa, pb) = if k == 0 { (c.as_ptr(), c.as_ptr()) } else { (b.as_ptr(), a.as_ptr()) };
+    // SAFETY: every pointer is valid for the extents checked above; sgemm_ reads A and B
+    // and writes only the m x n block of C.
+    unsafe { sgemm_(&tb_c, &ta_c, &mm, &nn, &kk, &one, pa, &la, pb, &lb, &beta, c.as_mut_ptr(), &lc) };
+}
+
+/// A growable f32 buffer whose start is 64-byte aligned.
+#[derive(Clone, Default)]
+pub struct Buf {
+    blocks: Vec<Block>,
+    len: usize,
+}
+
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+struct Block([f32; 16]);
+
+impl Buf {
+    pub fn zeros(len: usize) -> Self {
+        let mut b = Buf::default();
+        b.resize(len);
+        b
+    }
+
+    /// Sets the length; new elements are zero, kept ones keep their values.
+    pub fn resize(&mut self, len: usize) {
+        self.blocks.resize(len.div_ceil(16), Block([0.0; 16]));
+        self.len = len;
+    }
+}
+
+impl std::ops::Deref for Buf {
+    type Target = [f32];
+    fn deref(&self) -> &[f32] {
+        // SAFETY: the blocks are contiguous f32s, at least `len` of them.
+        unsafe { std::slice::from_raw_parts(self.blocks.as_ptr().cast::<f32>(), self.len) }
+    }
+}
+
+impl std::ops::DerefMut for Buf {
+    fn deref_mut(&mut self) -> &mut [f32] {
+        // SAFETY: as above, uniquely borrowed.
+        unsafe { std::slice::from_raw_parts_mut(self.blocks.as_mut_ptr().cast::<f32>(), self.len) }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Layer {
+    /// Offset of the `out x in` row-major weight in the flat parameters; the bias follows it.
+    w: usize,
+    inp: usize,
+    out: usize,
+}
+
+impl Layer {
+    fn b(&self) -> usize {
+        self.w + self.inp * self.out
+    }
+}
+
+/// A ReLU MLP (ReLU after every layer but the last) as one flat vector of parameters, laid
+/// out as libtorch's Linear layers: per layer the `out x in` weight, then the bias.
+#[derive(Clone)]
+pub struct Dense {
+    layers: Vec<Layer>,
+    pub params: Buf,
+}
+
+/// One thread's activations and gradient buffers for chunks of up to `rows` rows.
+#[derive(Clone, Default)]
+pub struct Scratch {
+    /// Every layer's output, the last one's included.
+    acts: Vec<Buf>,
+    d: Buf,
+    dprev: Buf,
+}
+
+impl Dense {
+    pub fn from_mlp(mlp: &Mlp) -> Self {
+        assert_eq!(mlp.activation(), Activation::Relu, "Dense trains ReLU networks");
+        let mut layers = Vec::new();
+        let mut params = Vec::new();
+        for (w, b) in mlp.parameters() {
+            let (out, inp) = (w.size()[0] as usize, w.size()[1] as usize);
+            layers.push(Layer { w: params.len(), inp, out });
+            params.extend(Vec::<f32>::try_from(w.detach().flatten(0, -1)).expect("f32 weights"));
+            params.extend(Vec::<f32>::try_from(b.detach()).expect("f32 bias"));
+        }
+        let mut buf = Buf::zeros(params.len());
+        buf.copy_from_slice(&params);
+        Dense { layers, params: buf }
+    }
+
+    /// Writes the parameters back into `mlp` (the network this was made from).
+    pub fn write_to(&self, mlp: &Mlp) {
+        tch::no_grad(|| {
+            for (l, (w, b)) in self.layers.iter().zip(mlp.parameters()) {
+                let mut w = w.shallow_clone();
+                let mut b = b.shallow_clone();
+                w.copy_(&Tensor::from_slice(&self.params[l.w..l.b()]).view([l.out as i64, l.inp as i64]));
+                b.copy_(&Tensor::from_slice(&self.params[l.b()..l.b() + l.out]));
+            }
+        });
+    }
+
+    pub fn len(&self) -> usize {
+        self.params.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.params.is_empty()
+    }
+
+    pub fn input_dim(&self) -> usize {
+        self.layers[0].inp
+    }
+
+    pub fn output_dim(&self) -> usize {
+        self.layers.last().expect("an MLP has layers").out
+    }
+
+    /// The outputs (`rows x out`) of `x` (`rows x in`), kept in `s` for [`Dense::backward`].
+    pub fn forward<'s>(&self, x: &[f32], rows: usize, s: &'s mut Scratch) -> &'s [f32] {
+        s.acts.resize_with(self.layers.len(), Buf::default);
+        let last = self.layers.len() - 1;
+        for (i, l) in self.layers.iter().enumerate() {
+            let (done, rest) = s.acts.split_at_mut(i);
+            let input: &[f32] = if i == 0 { x } else { &done[i - 1] };
+            let y = &mut rest[0];
+            y.resize(rows * l.out);
+            gemm(false, true, rows, l.out, l.inp, input, l.inp, &self.params[l.w..l.b()], l.inp, 0.0, y, l.out);
+            add_bias(y, &self.params[l.b()..l.b() + l.out], i < last);
+        }
+        &s.acts[last][..rows * self.output_dim()]
+    }
+
+    /// Adds the gradient of a loss to `grads` (laid out as the parameters), given the input
+    /// of the last [`Dense::forward`] and the loss's gradient `dout` with respect to its
+    /// outputs (`rows x out`).
+    pub fn backward(&self, x: &[f32], rows: usize, dout: &[f32], s: &mut Scratch, grads: &mut [f32]) {
+        let Scratch { acts, d, dprev } = s;
+        let last = self.layers.len() - 1;
+        let top = self.layers[last];
+        col_sums(&dout[..rows * top.out], &mut grads[top.b()..top.b() + top.out]);
+        for (i, l) in self.layers.iter().enumerate().rev() {
+            // The gradient with respect to this layer's outputs (its bias's is already added).
+            let cur: &[f32] = if i == last { &dout[..rows * l.out] } else { d };
+            let input: &[f32] = if i == 0 { x } else { &acts[i - 1] };
+            gemm(true, false, l.out, l.inp, rows, cur, l.out, input, l.inp, 1.0, &mut grads[l.w..l.b()], l.inp);
+            if i > 0 {
+                dprev.resize(rows * l.inp);
+                gemm(false, false, rows, l.inp, l.out, cur, l.out, &self.params[l.w..l.b()], l.inp, 0.0, dprev, l.inp);
+                let below = self.layers[i - 1];
+                relu_backward(dprev, input, &mut grads[below.b()..below.b() + below.out]);
+                std::mem::swap(d, dprev);
+            }
+        }
+    }
+
+    /// Adds the gradient of `coef * sum of squared weights` (not biases) to `grads`.
+    pub fn add_weight_l2(&self, coef: f32, grads: &mut [f32]) {
+        for l in &self.layers {
+            axpy(2.0 * coef, &self.params[l.w..l.b()], &mut grads[l.w..l.b()]);
+        }
+    }
+
+    /// The sum of squared weights (not biases).
+    pub fn weight_l2(&self) -> f64 {
+        self.layers.iter().flat_map(|l| &self.params[l.w..l.b()]).map(|&w| (w as f64) * (w as f64)).sum()
+    }
+}
+
+/// The elementwise passes, each compiled twice, for AVX-512 (chosen at run time where the
+/// CPU has it) and for the baseline x86-64 the crate targets. Both give the same bits: the
+/// passes are independent per element or sum over rows in row order, and Rust neither
+/// reassociates nor fuses multiply-adds.
+macro_rules! vectorised {
+    ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) $body:block) => {
+        $(#[$doc])*
+        pub fn $name($($arg: $ty),*) {
+            #[inline(always)]
+            fn body($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                unsafe fn wide($($arg: $ty),*) {
+                    body($($arg),*)
+                }
+                if std::arch::is_x86_feature_detected!("avx512f") {
+                    // SAFETY: the CPU has AVX-512F.
+                    return unsafe { wide($($arg),*) };
+                }
+            }
+            body($($arg),*)
+        }
+    };
+}
+
+vectorised! {
+    /// `y = y + bias` on every row, then the ReLU where `relu`.
+    fn add_bias(y: &mut [f32], bias: &[f32], relu: bool) {
+        for row in y.chunks_exact_mut(bias.len()) {
+            for (v, b) in row.iter_mut().zip(bias) {
+                let t = *v + b;
+                *v = if relu { t.max(0.0) } else { t };
+            }
+        }
+    }
+}
+
+vectorised! {
+    /// `sums += ` the column sums of `m` (rows of `sums.len()`), row by row.
+    fn col_sums(m: &[f32], sums: &mut [f32]) {
+        for row in m.chunks_exact(sums.len()) {
+            sums.iter_mut().zip(row).for_each(|(s, v)| *s += v);
+        }
+    }
+}
+
+vectorised! {
+    /// Through a ReLU whose outputs were `h`: `g` is zeroed where the unit was off, and its
+    /// column sums (the layer's bias gradient) are added to `db`.
+    fn relu_backward(g: &mut [f32], h: &[f32], db: &mut [f32]) {
+        for (grow, hrow) in g.chunks_exact_mut(db.len()).zip(h.chunks_exact(db.len())) {
+            for ((gv, &hv), s) in grow.iter_mut().zip(hrow).zip(db.iter_mut()) {
+                // A select, not a branch, so that it vectorises.
+                let v = if hv > 0.0 { *gv } else { 0.0 };
+                *gv = v;
+                *s += v;
+            }
+        }
+    }
+}
+
+vectorised! {
+    /// `y += a x`.
+    fn axpy(a: f32, x: &[f32], y: &mut [f32]) {
+        y.iter_mut().zip(x).for_each(|(y, x)| *y += a * x);
+    }
+}
+
+vectorised! {
+    /// `a += b`, elementwise.
+    fn add_into(a: &mut [f32], b: &[f32]) {
+        a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+    }
+}
+
+vectorised! {
+    /// One Adam update of `params` from `grads`, with moments `m` and `v`, step size `step`
+    /// (the learning rate over the first moment's bias correction) and `bc2s`, the square
+    /// root of the second moment's bias correction.
+    fn adam_update(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
+        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
+        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= step * *m / (v.sqrt() / bc2s + eps);
+        }
+    }
+}
+
+/// Adam (betas 0.9 and 0.999, eps 1e-8, no weight decay), as libtorch's: the bias-corrected
+/// step `lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)`.
+pub struct Adam {
+    lr: f32,
+    m: Buf,
+    v: Buf,
+    t: i32,
+}
+
+impl Adam {
+    pub fn new(len: usize, lr: f64) -> Self {
+        Adam { lr: lr as f32, m: Buf::zeros(len), v: Buf::zeros(len), t: 0 }
+    }
+
+    pub fn step(&mut self, params: &mut [f32], grads: &[f32]) {
+        self.t += 1;
+        let step = self.lr / (1.0 - 0.9f32.powi(self.t));
+        let bc2s = (1.0 - 0.999f32.powi(self.t)).sqrt();
+        adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
+    }
+}
+
+/// The threads that compute lanes, kept for a whole training run: a thread started per step
+/// would pay MKL's per-thread set-up every step (10 % of T-REX's time on two cores).
+pub struct LanePool(Option<rayon::ThreadPool>);
+
+impl LanePool {
+    /// Up to `threads` threads (none of them the caller's, which waits while they run).
+    pub fn new(threads: usize) -> Self {
+        if threads.min(LANES) <= 1 {
+            return LanePool(None);
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.min(LANES))
+            .thread_name(|i| format!("idrex-lane-{i}"))
+            .start_handler(|_| {
+                // For the thread's whole life, which is the pool's.
+                std::mem::forget(SequentialBlas::new());
+                std::mem::forget(FlushDenormals::new());
+            })
+            .build();
+        // Without threads to spare, the lanes run on the caller's thread: same result.
+        LanePool(pool.ok())
+    }
+
+    /// Runs `f(lane, k)` for every lane `k`.
+    pub fn run<T: Send>(&self, lanes: &mut [T], f: impl Fn(&mut T, usize) + Sync) {
+        use rayon::prelude::*;
+        match &self.0 {
+            None => lanes.iter_mut().enumerate().for_each(|(k, lane)| f(lane, k)),
+            Some(pool) => pool.install(|| lanes.par_iter_mut().enumerate().for_each(|(k, lane)| f(lane, k))),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::Init;
+    use tch::{Device, Kind, nn, nn::Module};
+
+    #[test]
+    fn gemm_matches_a_naive_product_in_every_transpose() {
+        let (m, n, k) = (5, 3, 4);
+        let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.91).cos()).collect();
+        let at = |i: usize, j: usize| a[i * k + j];
+        let bt = |i: usize, j: usize| b[i * n + j];
+        let want: Vec<f32> = (0..m * n).map(|ij| (0..k).map(|p| at(ij / n, p) * bt(p, ij % n)).sum()).collect();
+        // The transposed operands, stored transposed.
+        let a_t: Vec<f32> = (0..k * m).map(|ij| at(ij % m, ij / m)).collect();
+        let b_t: Vec<f32> = (0..n * k).map(|ij| bt(ij % k, ij / k)).collect();
+        for (ta, tb) in [(false, false), (true, false), (false, true), (true, true)] {
+            let (aa, lda) = if ta { (&a_t, m) } else { (&a, k) };
+            let (bb, ldb) = if tb { (&b_t, k) } else { (&b, n) };
+            let mut c = vec![1.0; m * n];
+            gemm(ta, tb, m, n, k, aa, lda, bb, ldb, 1.0, &mut c, n);
+            for (got, w) in c.iter().zip(&want) {
+                assert!((got - (w + 1.0)).abs() < 1e-5, "ta {ta} tb {tb}: {got} vs {}", w + 1.0);
+            }
+        }
+    }
+
+    #[test]
+    fn matches_libtorch_autograd() {
+        tch::manual_seed(3);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let mlp = Mlp::new(&vs.root(), &[7, 32, 16, 2], Activation::Relu, Init::Default);
+        let rows = 11;
+        let x = Tensor::randn([rows as i64, 7], (Kind::Float, Device::Cpu));
+        let target = Tensor::randn([rows as i64, 2], (Kind::Float, Device::Cpu));
+        // loss = sum (f(x) - target)^2 + 0.1 * sum of squared weights
+        let loss: Tensor = (mlp.forward(&x) - &target).square().sum(Kind::Float) + mlp.weight_l2() * 0.1;
+        loss.backward();
+        let dense = Dense::from_mlp(&mlp);
+        let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
+        let ts: Vec<f32> = Vec::try_from(target.flatten(0, -1)).unwrap();
+        let mut s = Scratch::default();
+        let _blas = SequentialBlas::new();
+        let out = dense.forward(&xs, rows, &mut s).to_vec();
+        let want: Vec<f32> = Vec::try_from(mlp.forward(&x).flatten(0, -1)).unwrap();
+        for (o, w) in out.iter().zip(&want) {
+            assert!((o - w).abs() < 1e-5);
+        }
+        let dout: Vec<f32> = out.iter().zip(&ts).map(|(o, t)| 2.0 * (o - t)).collect();
+        let mut grads = vec![0.0; dense.len()];
+        dense.backward(&xs, rows, &dout, &mut s, &mut grads);
+        dense.add_weight_l2(0.1, &mut grads);
+        let mut want = Vec::new();
+        for (w, b) in mlp.parameters() {
+            want.extend(Vec::<f32>::try_from(w.grad().flatten(0, -1)).unwrap());
+            want.extend(Vec::<f32>::try_from(b.grad()).unwrap());
+        }
+        assert_eq!(grads.len(), want.len());
+        for (i, (g, w)) in grads.iter().zip(&want).enumerate() {
+            assert!((g - w).abs() < 1e-4 * (1.0 + w.abs()), "parameter {i}: {g} vs {w}");
+        }
+    }
+
+    #[test]
+    fn adam_matches_libtorch() {
+        use tch::nn::OptimizerConfig;
+        tch::manual_seed(5);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let mlp = Mlp::new(&vs.root(), &[3, 4, 1], Activation::Relu, Init::Default);
+        let mut dense = Dense::from_mlp(&mlp);
+        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
+        let mut adam = Adam::new(dense.len(), 1e-2);
+        let x = Tensor::randn([6, 3], (Kind::Float, Device::Cpu));
+        let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
+        let mut s = Scratch::default();
+        for _ in 0..5 {
+            // loss = sum f(x)
+            opt.backward_step(&mlp.forward(&x).sum(Kind::Float));
+            dense.forward(&xs, 6, &mut s);
+            let mut grads = vec![0.0; dense.len()];
+            dense.backward(&xs, 6, &[1.0; 6], &mut s, &mut grads);
+            adam.step(&mut dense.params, &grads);
+        }
+        let after = Dense::from_mlp(&mlp);
+        for (a, b) in dense.params.iter().zip(after.params.iter()) {
+            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+        }
+    }
+}
