@@ -152,6 +152,22 @@ fn run_node(
     }
 }
 
+/// The cores each of `starting` (in priority order) is granted when `free` cores are not
+/// held by running stages: one each while there are free ones (the others wait: granted
+/// none), and what is left over to the stages that can use more ([`StageKind::parallel`]),
+/// shared evenly. So the stages' compute threads never add up to more than the cores.
+fn grants(starting: &[&Node], free: usize) -> Vec<usize> {
+    let mut grants: Vec<usize> = (0..starting.len()).map(|i| usize::from(i < free)).collect();
+    let mut spare = free.saturating_sub(starting.len());
+    let parallel: Vec<usize> = (0..starting.len()).filter(|&i| grants[i] > 0 && starting[i].kind().parallel()).collect();
+    for (j, &i) in parallel.iter().enumerate() {
+        let share = spare.div_ceil(parallel.len() - j);
+        grants[i] += share;
+        spare -= share;
+    }
+    grants
+}
+
 pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
     for f in &opts.force {
         if graph.get(f).is_none() {
@@ -172,14 +188,14 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     });
     let jobs = opts.jobs.max(1);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = (cores / jobs).max(1);
     let multi = MultiProgress::with_draw_target(if opts.progress { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() });
     let overall = multi.add(ProgressBar::new(graph.nodes.len() as u64));
     overall.set_style(ProgressStyle::with_template("[{elapsed_precise}] {bar:30} {pos}/{len} stages {wide_msg}").expect("template"));
     let stage_style = working_style();
 
     let mut status: BTreeMap<String, Status> = BTreeMap::new();
-    let mut running: BTreeSet<String> = BTreeSet::new();
+    // Running stage -> the cores it was granted.
+    let mut running: BTreeMap<String, usize> = BTreeMap::new();
     let (tx, rx) = mpsc::channel::<(String, Status)>();
     std::thread::scope(|scope| {
         loop {
@@ -198,13 +214,20 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             let mut ready: Vec<&Node> = graph
                 .nodes
                 .iter()
-                .filter(|n| !status.contains_key(&n.name) && !running.contains(&n.name))
+                .filter(|n| !status.contains_key(&n.name) && !running.contains_key(&n.name))
                 .filter(|n| n.inputs.iter().all(|(_, i)| matches!(status.get(i), Some(Status::Cached | Status::Computed { .. }))))
                 .collect();
             // Stable: equal estimates keep the graph's order.
             ready.sort_by(|a, b| priority[&b.name].total_cmp(&priority[&a.name]));
-            for n in ready.into_iter().take(jobs.saturating_sub(running.len())) {
-                running.insert(n.name.clone());
+            let starting: Vec<&Node> = ready.into_iter().take(jobs.saturating_sub(running.len())).collect();
+            let mut free = cores.saturating_sub(running.values().sum());
+            if jobs > cores {
+                // More jobs than cores was asked for: every job gets a thread.
+                free = free.max(starting.len());
+            }
+            for (n, threads) in starting.iter().zip(grants(&starting, free)).filter(|(_, t)| *t > 0) {
+                let n = *n;
+                running.insert(n.name.clone(), threads);
                 let key = keys[&n.name].clone();
                 let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
                 let forced = opts.force.contains(&n.name);
@@ -271,6 +294,26 @@ mod tests {
 
     fn value(store: &Store, o: &Outcome) -> String {
         std::fs::read_to_string(store.dir(&o.key).join("value.txt")).unwrap()
+    }
+
+    #[test]
+    fn cores_go_one_per_stage_then_to_the_stages_that_use_more() {
+        let bc = |name: &str| Node {
+            name: name.into(),
+            params: Params::Bc(stage::bc::BcParams { env: crate::env::EnvId::Hopper, bc: Default::default() }),
+            seed: 0,
+            inputs: Default::default(),
+        };
+        let (a, b, t) = (bc("a"), bc("b"), node("t", 1, &[], 0, false));
+        // Alone on an idle machine, BC gets every core; beside another stage, its share.
+        assert_eq!(grants(&[&a], 2), [2]);
+        assert_eq!(grants(&[&a, &t], 2), [1, 1]);
+        assert_eq!(grants(&[&t, &a], 4), [1, 3]);
+        assert_eq!(grants(&[&a, &b, &t], 8), [4, 3, 1]);
+        // Stages that use one thread get one; with no core free, a stage waits.
+        assert_eq!(grants(&[&t], 4), [1]);
+        assert_eq!(grants(&[&a, &t], 1), [1, 0]);
+        assert_eq!(grants(&[&a], 0), [0]);
     }
 
     #[test]

@@ -60,6 +60,10 @@ impl Estimates {
         let mut rates: BTreeMap<StageKind, Vec<f64>> = BTreeMap::new();
         for m in manifests {
             let Some(kind) = StageKind::parse(&m.kind) else { continue };
+            // An older version of a stage may have run at another speed.
+            if m.version != kind.version() {
+                continue;
+            }
             let Ok(params) = Params::from_json(kind, &m.params) else { continue };
             if m.wall_s.is_finite() && m.wall_s > 0.0 {
                 rates.entry(kind).or_default().push(m.wall_s / work(&params));

@@ -152,6 +152,11 @@ impl StageKind {
         }
     }
 
+    /// Whether the stage uses more than one thread when granted them (`ctx.threads`).
+    pub fn parallel(self) -> bool {
+        matches!(self, StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts)
+    }
+
     pub fn parse(name: &str) -> Option<StageKind> {
         StageKind::ALL.iter().copied().find(|k| k.name() == name)
     }
