@@ -37,9 +37,9 @@ fn work(params: &Params) -> f64 {
 fn reference_rate(kind: StageKind) -> f64 {
     match kind {
         StageKind::Ppo | StageKind::Demonstrator => 65.0 / 1e6,
-        StageKind::Bc => 139.0 / 50_000.0,
-        StageKind::MultiBcRollouts => 420.0 / 150_100.0,
-        StageKind::Trex => 230.0 / 9_000.0,
+        StageKind::Bc => 80.0 / 50_000.0,
+        StageKind::MultiBcRollouts => 220.0 / 150_100.0,
+        StageKind::Trex => 160.0 / 9_000.0,
         StageKind::NoiseRollouts | StageKind::InterpolationRollouts | StageKind::ActionNoiseRollouts => 20.0 / 100.0,
         // 26 checkpoints of 20 episodes each.
         StageKind::Eval => 12.0 / 20.0,
