@@ -3,6 +3,7 @@
 //! content-addressed artifacts in the store ([`crate::store`]); [`runner`] executes what is
 //! missing; [`stage`] holds each kind's parameters, metrics and body.
 pub mod config;
+pub mod cores;
 pub mod graph;
 pub mod idrex;
 pub mod plots;

@@ -152,22 +152,6 @@ fn run_node(
     }
 }
 
-/// The cores each of `starting` (in priority order) is granted when `free` cores are not
-/// held by running stages: one each while there are free ones (the others wait: granted
-/// none), and what is left over to the stages that can use more ([`StageKind::parallel`]),
-/// shared evenly. So the stages' compute threads never add up to more than the cores.
-fn grants(starting: &[&Node], free: usize) -> Vec<usize> {
-    let mut grants: Vec<usize> = (0..starting.len()).map(|i| usize::from(i < free)).collect();
-    let mut spare = free.saturating_sub(starting.len());
-    let parallel: Vec<usize> = (0..starting.len()).filter(|&i| grants[i] > 0 && starting[i].kind().parallel()).collect();
-    for (j, &i) in parallel.iter().enumerate() {
-        let share = spare.div_ceil(parallel.len() - j);
-        grants[i] += share;
-        spare -= share;
-    }
-    grants
-}
-
 pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
     for f in &opts.force {
         if graph.get(f).is_none() {
@@ -221,12 +205,17 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             ready.sort_by(|a, b| priority[&b.name].total_cmp(&priority[&a.name]));
             let starting: Vec<&Node> = ready.into_iter().take(jobs.saturating_sub(running.len())).collect();
             let mut free = cores.saturating_sub(running.values().sum());
+            if starting.iter().any(|n| n.kind().parallel()) && free > starting.len() {
+                // Extra cores only where other processes leave them idle.
+                free = free.min(super::cores::idle_elsewhere().unwrap_or(free).max(starting.len()));
+            }
             if jobs > cores {
                 // More jobs than cores was asked for: every job gets a thread.
                 free = free.max(starting.len());
             }
-            for (n, threads) in starting.iter().zip(grants(&starting, free)).filter(|(_, t)| *t > 0) {
+            for (n, threads) in starting.iter().zip(super::cores::grants(&starting, free)).filter(|(_, t)| *t > 0) {
                 let n = *n;
+                tracing::debug!(stage = %n.name, threads, "starting");
                 running.insert(n.name.clone(), threads);
                 let key = keys[&n.name].clone();
                 let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
@@ -294,26 +283,6 @@ mod tests {
 
     fn value(store: &Store, o: &Outcome) -> String {
         std::fs::read_to_string(store.dir(&o.key).join("value.txt")).unwrap()
-    }
-
-    #[test]
-    fn cores_go_one_per_stage_then_to_the_stages_that_use_more() {
-        let bc = |name: &str| Node {
-            name: name.into(),
-            params: Params::Bc(stage::bc::BcParams { env: crate::env::EnvId::Hopper, bc: Default::default() }),
-            seed: 0,
-            inputs: Default::default(),
-        };
-        let (a, b, t) = (bc("a"), bc("b"), node("t", 1, &[], 0, false));
-        // Alone on an idle machine, BC gets every core; beside another stage, its share.
-        assert_eq!(grants(&[&a], 2), [2]);
-        assert_eq!(grants(&[&a, &t], 2), [1, 1]);
-        assert_eq!(grants(&[&t, &a], 4), [1, 3]);
-        assert_eq!(grants(&[&a, &b, &t], 8), [4, 3, 1]);
-        // Stages that use one thread get one; with no core free, a stage waits.
-        assert_eq!(grants(&[&t], 4), [1]);
-        assert_eq!(grants(&[&a, &t], 1), [1, 0]);
-        assert_eq!(grants(&[&a], 0), [0]);
     }
 
     #[test]
