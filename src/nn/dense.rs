@@ -447,6 +447,49 @@ mod tests {
         }
     }
 
+    /// The passes run their AVX-512 build on a CPU that has it: the bits must be those of
+    /// the same operations one element at a time.
+    #[test]
+    fn vectorised_passes_give_the_scalar_bits() {
+        let n = 16 * 37 + 5;
+        let vals = |k: f32| (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect::<Vec<f32>>();
+        let (g, h, p0) = (vals(0.37), vals(0.91), vals(0.13));
+        let width = n / 7;
+        let rows = n / width;
+        // ReLU backward with the bias gradient.
+        let (mut got, mut db) = (g.clone(), vec![0.5f32; width]);
+        relu_backward(&mut got[..rows * width], &h[..rows * width], &mut db);
+        let (mut want, mut want_db) = (g.clone(), vec![0.5f32; width]);
+        for r in 0..rows {
+            for c in 0..width {
+                let i = r * width + c;
+                want[i] = if h[i] > 0.0 { g[i] } else { 0.0 };
+                want_db[c] += want[i];
+            }
+        }
+        assert_eq!(bits(&got), bits(&want));
+        assert_eq!(bits(&db), bits(&want_db));
+        // Adam.
+        let (mut p, mut m, mut v) = (p0.clone(), h.clone(), g.iter().map(|x| x * x).collect::<Vec<f32>>());
+        let (mut wp, mut wm, mut wv) = (p.clone(), m.clone(), v.clone());
+        adam_update(&mut p, &g, &mut m, &mut v, 1e-3 / 0.1, 0.0447);
+        for i in 0..n {
+            wm[i] = 0.9 * wm[i] + (1.0 - 0.9) * g[i];
+            wv[i] = 0.999 * wv[i] + (1.0 - 0.999) * g[i] * g[i];
+            wp[i] -= 1e-3 / 0.1 * wm[i] / (wv[i].sqrt() / 0.0447 + 1e-8);
+        }
+        assert_eq!((bits(&p), bits(&m), bits(&v)), (bits(&wp), bits(&wm), bits(&wv)));
+        // Bias and ReLU.
+        let mut y = g.clone();
+        add_bias(&mut y[..rows * width], &h[..width], true);
+        let want: Vec<f32> = (0..rows * width).map(|i| (g[i] + h[i % width]).max(0.0)).collect();
+        assert_eq!(bits(&y[..rows * width]), bits(&want));
+    }
+
+    fn bits(x: &[f32]) -> Vec<u32> {
+        x.iter().map(|v| v.to_bits()).collect()
+    }
+
     #[test]
     fn matches_libtorch_autograd() {
         tch::manual_seed(3);
