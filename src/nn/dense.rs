@@ -170,7 +170,7 @@ pub struct Dense {
     pub params: Buf,
 }
 
-/// One thread's activations and gradient buffers for chunks of up to `rows` rows.
+/// One thread's activations and gradient buffers, grown to the largest chunk it has seen.
 #[derive(Clone, Default)]
 pub struct Scratch {
     /// Every layer's output, the last one's included.
