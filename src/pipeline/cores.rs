@@ -31,8 +31,7 @@ const WINDOW: Duration = Duration::from_millis(100);
 
 /// How many of the CPUs this process may run on are idle, not counting this process's own
 /// use of them, watched for [`WINDOW`]: the CPUs' busy time (`/proc/stat`) less this
-/// process's threads' run time (`/proc/self/task/*/schedstat`). None where `/proc` cannot
-/// tell (not Linux).
+/// process's CPU time. None where `/proc` cannot tell (not Linux).
 pub fn idle_elsewhere() -> Option<usize> {
     let cpus = allowed_cpus()?;
     let (busy0, own0) = (busy_ns(&cpus)?, own_ns()?);
@@ -76,16 +75,16 @@ fn busy_ns(cpus: &[usize]) -> Option<f64> {
     Some(busy * 1e7)
 }
 
-/// Run time of this process's threads so far, in ns.
+/// CPU time of this process so far, in ns, its ended threads' included (`/proc/self/stat`,
+/// in ticks of 1/100 s). Not the sum over `/proc/self/task`: a stage thread that ended
+/// during the window would count as another process.
 fn own_ns() -> Option<f64> {
-    let mut total = 0.0;
-    for task in std::fs::read_dir("/proc/self/task").ok()?.flatten() {
-        // A thread may exit between listing and reading.
-        if let Ok(s) = std::fs::read_to_string(task.path().join("schedstat")) {
-            total += s.split_whitespace().next().and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
-        }
-    }
-    Some(total)
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // After the command name (in parentheses, and free to hold spaces): field 3 onwards.
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    Some((utime + stime) * 1e7)
 }
 
 #[cfg(test)]
