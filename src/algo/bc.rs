@@ -8,7 +8,7 @@ use tch::{Kind, Tensor};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::dense::{Adam, Buf, Dense, LANES, LanePool, Scratch, SequentialBlas, add_into};
+use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
 use crate::nn::{ActorCritic, PolicyConfig, WeightInit};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -105,29 +105,23 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) ->
     config.hidden = cfg.hidden.clone();
     config.init = cfg.init;
     let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
-    let (_blas, _ftz) = (SequentialBlas::new(), crate::nn::FlushDenormals::new());
-    let mut dense = Dense::from_mlp(&policy.actor);
-    let mut adam = Adam::new(dense.len(), cfg.lr);
+    let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers);
     let mut lanes: Vec<Lane> = (0..LANES)
         .map(|_| Lane {
             scratch: Scratch::default(),
-            grads: Buf::zeros(dense.len()),
+            grads: Buf::zeros(trainer.net.len()),
             x: Buf::default(),
             y: Vec::new(),
             dout: Vec::new(),
             sse: 0.0,
         })
         .collect();
-    let mut grads = Buf::zeros(dense.len());
-    let pool = LanePool::new(workers);
     let nt = train.len();
     let batch = cfg.batch_size.min(nt);
-    let per_lane = batch.div_ceil(LANES);
     let scale = 2.0 / batch as f32;
     for it in 0..cfg.iterations {
         let picks: Vec<usize> = (0..batch).map(|_| train[rng.random_range(0..nt)]).collect();
-        pool.run(&mut lanes, |lane, k| {
-            let mine = picks.get(k * per_lane..((k + 1) * per_lane).min(batch)).unwrap_or(&[]);
+        trainer.run(&mut lanes, &picks, |lane, mine, net| {
             lane.grads.fill(0.0);
             lane.sse = 0.0;
             lane.x.resize(mine.len() * od);
@@ -136,30 +130,26 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) ->
                 row.copy_from_slice(&x[r * od..(r + 1) * od]);
                 lane.y.extend_from_slice(&y[r * ad..(r + 1) * ad]);
             }
-            let pred = dense.forward(&lane.x, mine.len(), &mut lane.scratch);
+            let pred = net.forward(&lane.x, mine.len(), &mut lane.scratch);
             lane.dout.clear();
             for (p, t) in pred.iter().zip(&lane.y) {
                 lane.sse += ((p - t) as f64).powi(2);
                 // d/dp of (p - t)^2 / batch.
                 lane.dout.push(scale * (p - t));
             }
-            dense.backward(&lane.x, mine.len(), &lane.dout, &mut lane.scratch, &mut lane.grads);
+            net.backward(&lane.x, mine.len(), &lane.dout, &mut lane.scratch, &mut lane.grads);
         });
-        grads.copy_from_slice(&lanes[0].grads);
-        lanes[1..].iter().for_each(|l| add_into(&mut grads, &l.grads));
         if it % 100 == 0 || it + 1 == cfg.iterations {
-            let l = lanes.iter().map(|l| l.sse).sum::<f64>() / batch as f64 + cfg.l2 * dense.weight_l2();
+            let l = lanes.iter().map(|l| l.sse).sum::<f64>() / batch as f64 + cfg.l2 * trainer.net.weight_l2();
             if !l.is_finite() {
                 return Err(Error::Diverged(format!("BC diverged at iteration {it}: the loss is {l}; lower bc.lr (now {})", cfg.lr)));
             }
         }
-        dense.add_weight_l2(cfg.l2 as f32, &mut grads);
-        adam.step(&mut dense.params, &grads);
+        trainer.step(lanes.iter().map(|l| &l.grads[..]));
     }
-    if dense.params.iter().any(|p| !p.is_finite()) {
+    if !trainer.write_to(&policy.actor) {
         return Err(Error::Diverged(format!("BC ended with non-finite weights; lower bc.lr (now {})", cfg.lr)));
     }
-    dense.write_to(&policy.actor);
     let report = tch::no_grad(|| BcReport {
         train_steps: train.len(),
         val_steps: val.len(),

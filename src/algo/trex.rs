@@ -13,7 +13,7 @@ use tch::nn;
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::dense::{Adam, Buf, Dense, LANES, LanePool, Scratch, SequentialBlas, add_into};
+use crate::nn::dense::{Buf, Dense, LANES, Scratch, Trainer};
 use crate::nn::{RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};
 
@@ -312,27 +312,16 @@ fn train_model(
     let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
     let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
     let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
-    let (_blas, _ftz) = (SequentialBlas::new(), crate::nn::FlushDenormals::new());
-    let mut dense = Dense::from_mlp(net);
-    let mut adam = Adam::new(dense.len(), cfg.lr);
-    let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(dense.len())).collect();
-    let mut grads = Buf::zeros(dense.len());
-    let pool = LanePool::new(threads);
+    let mut trainer = Trainer::new(net, cfg.lr, cfg.l2, threads);
+    let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(trainer.net.len())).collect();
     let mut final_loss = f64::NAN;
     let mut curve = Vec::new();
     for it in 0..cfg.iterations {
         let picks: Vec<&Pair> = (0..cfg.batch_size).map(|_| &train[rng.random_range(0..train.len())]).collect();
-        let per_lane = picks.len().div_ceil(LANES);
         // The loss is the mean over the batch's pairs.
         let scale = 1.0 / picks.len() as f32;
-        pool.run(&mut lanes, |lane, k| {
-            let mine = picks.get(k * per_lane..((k + 1) * per_lane).min(picks.len())).unwrap_or(&[]);
-            lane.run(&dense, trajs, mine, cfg.action_input, Some(scale));
-        });
-        grads.copy_from_slice(&lanes[0].grads);
-        lanes[1..].iter().for_each(|l| add_into(&mut grads, &l.grads));
-        dense.add_weight_l2(cfg.l2 as f32, &mut grads);
-        adam.step(&mut dense.params, &grads);
+        trainer.run(&mut lanes, &picks, |lane, mine, net| lane.run(net, trajs, mine, cfg.action_input, Some(scale)));
+        trainer.step(lanes.iter().map(|l| &l.grads[..]));
         final_loss = lanes.iter().map(|l| l.ce).sum::<f64>() / picks.len() as f64;
         // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
         if !final_loss.is_finite() || final_loss > 1e3 {
@@ -347,17 +336,16 @@ fn train_model(
             curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
         }
     }
-    if dense.params.iter().any(|p| !p.is_finite()) {
+    if !trainer.write_to(net) {
         return Err(Error::Diverged(format!("T-REX model {m} has non-finite weights; lower trex.lr (now {})", cfg.lr)));
     }
-    dense.write_to(net);
     let lane = &mut lanes[0];
     Ok(ModelReport {
         train_pairs: train.len(),
         val_pairs: val.len(),
         final_loss,
-        train_accuracy: accuracy(&dense, trajs, train, cfg.action_input, lane),
-        val_accuracy: accuracy(&dense, trajs, val, cfg.action_input, lane),
+        train_accuracy: accuracy(&trainer.net, trajs, train, cfg.action_input, lane),
+        val_accuracy: accuracy(&trainer.net, trajs, val, cfg.action_input, lane),
         curve,
     })
 }

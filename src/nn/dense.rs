@@ -100,7 +100,7 @@ pub fn gemm(
     // Row-major C = op(A) op(B) is column-major C' = op(B)' op(A)': swap the operands.
     let (tb_c, ta_c) = (if tb { b'T' } else { b'N' } as c_char, if ta { b'T' } else { b'N' } as c_char);
     let (mm, nn, kk, la, lb, lc) = (as_int(n), as_int(m), as_int(k), as_int(ldb), as_int(lda), as_int(ldc));
-    let (one, beta) = (1.0f32, beta);
+    let one = 1.0f32;
     // With k = 0 BLAS does not read A or B, which may then be empty.
     let (pa, pb) = if k == 0 { (c.as_ptr(), c.as_ptr()) } else { (b.as_ptr(), a.as_ptr()) };
     // SAFETY: every pointer is valid for the extents checked above; sgemm_ reads A and B
@@ -383,6 +383,57 @@ impl Adam {
         let step = self.lr / (1.0 - 0.9f32.powi(self.t));
         let bc2s = (1.0 - 0.999f32.powi(self.t)).sqrt();
         adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
+    }
+}
+
+/// What BC and T-REX share of a training run: the network, Adam, the lane threads and the
+/// summed gradient, with MKL sequential and denormals flushed on the calling thread while
+/// it lives.
+pub struct Trainer {
+    pub net: Dense,
+    adam: Adam,
+    grads: Buf,
+    pool: LanePool,
+    l2: f32,
+    _blas: SequentialBlas,
+    _ftz: FlushDenormals,
+}
+
+impl Trainer {
+    /// Trains `mlp`'s parameters with Adam at `lr` and `l2` x the sum of squared weights
+    /// added to the loss, on up to `threads` threads.
+    pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize) -> Self {
+        let (_blas, _ftz) = (SequentialBlas::new(), FlushDenormals::new());
+        let net = Dense::from_mlp(mlp);
+        let (adam, grads) = (Adam::new(net.len(), lr), Buf::zeros(net.len()));
+        Trainer { net, adam, grads, pool: LanePool::new(threads), l2: l2 as f32, _blas, _ftz }
+    }
+
+    /// Runs `f(lane, share, net)` for each of the [`LANES`] lanes, with the lane's share of
+    /// `batch`: a fixed partition into consecutive parts (the last may be shorter or empty).
+    pub fn run<L: Send, T: Sync>(&self, lanes: &mut [L], batch: &[T], f: impl Fn(&mut L, &[T], &Dense) + Sync) {
+        assert_eq!(lanes.len(), LANES, "one state per lane");
+        let per = batch.len().div_ceil(LANES);
+        let net = &self.net;
+        self.pool.run(lanes, |lane, k| f(lane, batch.get(k * per..((k + 1) * per).min(batch.len())).unwrap_or(&[]), net));
+    }
+
+    /// One Adam step on the lanes' gradients summed in lane order, plus the L2 term's.
+    pub fn step<'a>(&mut self, lane_grads: impl IntoIterator<Item = &'a [f32]>) {
+        let mut lanes = lane_grads.into_iter();
+        self.grads.copy_from_slice(lanes.next().expect("at least one lane"));
+        lanes.for_each(|g| add_into(&mut self.grads, g));
+        self.net.add_weight_l2(self.l2, &mut self.grads);
+        self.adam.step(&mut self.net.params, &self.grads);
+    }
+
+    /// Writes the parameters back into `mlp`; false (writing nothing) if any is not finite.
+    pub fn write_to(&self, mlp: &Mlp) -> bool {
+        let finite = self.net.params.iter().all(|p| p.is_finite());
+        if finite {
+            self.net.write_to(mlp);
+        }
+        finite
     }
 }
 
