@@ -9,8 +9,9 @@
 //!
 //! Results are deterministic: `sgemm` runs sequentially on the calling thread
 //! ([`SequentialBlas`]), buffers are aligned the same way on every run (MKL's code path may
-//! depend on alignment), and callers sum gradients over a fixed partition of the batch
-//! ([`LANES`]) in a fixed order, whatever the number of threads that compute them.
+//! depend on alignment), and [`Trainer`] splits each batch into a fixed partition
+//! ([`LANES`]) whose gradients it sums in a fixed order, whatever the number of threads that
+//! compute them.
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
 use std::os::raw::{c_char, c_int};
 
@@ -213,10 +214,6 @@ impl Dense {
 
     pub fn is_empty(&self) -> bool {
         self.params.is_empty()
-    }
-
-    pub fn input_dim(&self) -> usize {
-        self.layers[0].inp
     }
 
     pub fn output_dim(&self) -> usize {
