@@ -9,6 +9,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::env::{Env, EnvId, VecEnv};
+use crate::nn::{Device, DeviceChoice};
 
 #[derive(Debug, clap::Args)]
 pub struct EnvBenchArgs {
@@ -208,6 +209,9 @@ pub struct TrexBenchArgs {
     pub iterations: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where T-REX trains (`auto`: the GPU where libtorch sees one).
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
 }
 
 /// Epsilon-greedy rollouts of `policy` at D-REX's 20 levels, `per_level` each: the
@@ -227,13 +231,15 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
     let held = eps_rollouts(&mut env, &policy, args.held_out_per_level, args.seed + 1);
     let cfg = trex::TrexConfig { iterations: args.iterations, ..Default::default() };
     let ranking = trex::Ranking::by_score(train.iter().map(|t| -t.meta.noise).collect());
+    let device = args.device.resolve();
     let start = Instant::now();
-    let (model, reports) = trex::train(&train, &ranking, &cfg, args.seed, std::thread::available_parallelism().map_or(1, |n| n.get()))?;
+    let (model, reports) =
+        trex::train(&train, &ranking, &cfg, args.seed, std::thread::available_parallelism().map_or(1, |n| n.get()), device)?;
     let secs = start.elapsed().as_secs_f64();
     let pred: Vec<f64> = held.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
     let truth: Vec<f64> = held.iter().map(|t| t.ret()).collect();
     let out = serde_json::json!({
-        "env": id.name(), "train_trajectories": train.len(), "held_out_trajectories": held.len(),
+        "env": id.name(), "device": device.name(), "train_trajectories": train.len(), "held_out_trajectories": held.len(),
         "models": cfg.models, "iterations": cfg.iterations, "train_s": secs,
         "iterations_per_s": (cfg.models * cfg.iterations) as f64 / secs,
         "val_accuracy": reports.iter().map(|r| r.val_accuracy).collect::<Vec<_>>(),
@@ -258,6 +264,10 @@ pub struct LearnersBenchArgs {
     /// Python with torch for the baseline (default: the bootstrap environment's; "none" skips it).
     #[arg(long)]
     pub python: Option<String>,
+    /// Where idrex's learners and the PyTorch loop run (`auto`: the GPU where libtorch sees
+    /// one; on the GPU, idrex's CPU learners are measured too, as the figure to beat).
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Auto)]
+    pub device: DeviceChoice,
 }
 
 /// Synthetic HalfCheetah-sized rollouts (17-dim observations, 6-dim actions): `n` episodes of
@@ -287,18 +297,26 @@ const TREX_FLOP: f64 = 3.0 * 2.0 * (64.0 * 2.0 * 50.0) * (17.0 * 256.0 + 256.0 *
 /// FLOPs of one BC iteration (128 samples through 17-256-256-256-256-6).
 const BC_FLOP: f64 = 3.0 * 2.0 * 128.0 * (17.0 * 256.0 + 3.0 * 256.0 * 256.0 + 256.0 * 6.0);
 
-/// The machine's attainable fp32 rate on `threads` threads: libtorch's 2048 x 2048 matrix
-/// product (MKL/oneDNN), best of 5.
-fn gemm_gflops(threads: usize) -> f64 {
+/// The attainable fp32 rate of `device` (on `threads` threads on the CPU): libtorch's
+/// 2048 x 2048 matrix product (MKL/oneDNN) on the CPU, 8192 x 8192 (cuBLAS, TF32 off, as
+/// libtorch's default) on the GPU; best of 5.
+fn gemm_gflops(threads: usize, device: Device) -> f64 {
     tch::set_num_threads(threads as i32);
-    let n = 2048;
-    let a = tch::Tensor::randn([n, n], (tch::Kind::Float, tch::Device::Cpu));
-    let b = tch::Tensor::randn([n, n], (tch::Kind::Float, tch::Device::Cpu));
+    let n = if device.is_cpu() { 2048 } else { 8192 };
+    let a = tch::Tensor::randn([n, n], (tch::Kind::Float, device.tch()));
+    let b = tch::Tensor::randn([n, n], (tch::Kind::Float, device.tch()));
+    let sync = || {
+        if !device.is_cpu() {
+            tch::Cuda::synchronize(0);
+        }
+    };
     let _ = a.matmul(&b);
+    sync();
     let best = (0..5)
         .map(|_| {
             let t = Instant::now();
             let _ = a.matmul(&b);
+            sync();
             t.elapsed().as_secs_f64()
         })
         .fold(f64::INFINITY, f64::min);
@@ -317,27 +335,35 @@ fn marginal(n: usize, mut f: impl FnMut(usize) -> anyhow::Result<()>) -> anyhow:
     Ok((t.elapsed().as_secs_f64() - once).max(1e-9))
 }
 
-pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
+/// idrex's T-REX (model-iterations/s) and BC (iterations/s) rates on `device`.
+fn learner_rates(args: &LearnersBenchArgs, threads: usize, device: Device) -> anyhow::Result<(f64, f64)> {
     use crate::algo::{bc, trex};
-    let threads = args.threads.max(1);
-    let peak = gemm_gflops(threads);
     // T-REX: 100 episodes of 1000 steps, 3 members on `threads` workers.
     let trajs = synthetic(100, 1000, 0);
     let ranking = trex::Ranking::by_score(trajs.iter().map(|t| -t.meta.noise).collect());
     crate::nn::single_threaded();
     let trex_s = marginal(args.trex_iterations, |n| {
         let cfg = trex::TrexConfig { iterations: n, ..Default::default() };
-        trex::train(&trajs, &ranking, &cfg, 0, threads).map(|_| ()).map_err(Into::into)
+        trex::train(&trajs, &ranking, &cfg, 0, threads, device).map(|_| ()).map_err(Into::into)
     })?;
-    let trex_rate = (3 * args.trex_iterations) as f64 / trex_s;
     // BC: one 1000-step demonstration, on `threads` threads as the PyTorch side gets (the
     // pipeline gives it the stage's share of the cores).
     let demo = synthetic(1, 1000, 1);
     let bc_s = marginal(args.bc_iterations, |n| {
         let cfg = bc::BcConfig { iterations: n, ..Default::default() };
-        bc::train(&demo, &cfg, 0, threads).map(|_| ()).map_err(Into::into)
+        bc::train(&demo, &cfg, 0, threads, device).map(|_| ()).map_err(Into::into)
     })?;
-    let bc_rate = args.bc_iterations as f64 / bc_s;
+    Ok(((3 * args.trex_iterations) as f64 / trex_s, args.bc_iterations as f64 / bc_s))
+}
+
+pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
+    let threads = args.threads.max(1);
+    let device = args.device.resolve();
+    device.ensure_available()?;
+    let peak = gemm_gflops(threads, device);
+    let (trex_rate, bc_rate) = learner_rates(args, threads, device)?;
+    // On the GPU, the CPU learners are the figure to beat.
+    let cpu = if device.is_cpu() { None } else { Some(learner_rates(args, threads, Device::Cpu)?) };
     let python = args.python.clone().or_else(default_python).filter(|p| p != "none");
     let torch: Option<serde_json::Value> = match &python {
         None => None,
@@ -348,6 +374,7 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
                 .args(["--threads", &threads.to_string()])
                 .args(["--trex-iterations", &args.trex_iterations.to_string()])
                 .args(["--bc-iterations", &args.bc_iterations.to_string()])
+                .args(["--device", device.name()])
                 .output()
                 .with_context(|| format!("cannot run {py} {}", script.display()))?;
             anyhow::ensure!(out.status.success(), "{}: {}", script.display(), String::from_utf8_lossy(&out.stderr));
@@ -357,6 +384,7 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     let get = |k: &str| torch.as_ref().and_then(|t| t[k].as_f64());
     let (pt_trex, pt_bc) = (get("trex_model_iterations_per_s"), get("bc_iterations_per_s"));
     let out = serde_json::json!({
+        "device": device.name(),
         "threads": threads,
         "gemm_gflops": peak,
         "trex": {
@@ -364,12 +392,14 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
             "ratio": pt_trex.map(|p| trex_rate / p), "gflop_per_model_iteration": TREX_FLOP / 1e9,
             "fraction_of_gemm_peak": trex_rate * TREX_FLOP / 1e9 / peak,
             "pytorch_fraction_of_gemm_peak": pt_trex.map(|p| p * TREX_FLOP / 1e9 / peak),
+            "idrex_cpu_model_iterations_per_s": cpu.map(|c| c.0), "speedup_over_idrex_cpu": cpu.map(|c| trex_rate / c.0),
         },
         "bc": {
             "idrex_iterations_per_s": bc_rate, "pytorch_iterations_per_s": pt_bc,
             "ratio": pt_bc.map(|p| bc_rate / p), "gflop_per_iteration": BC_FLOP / 1e9,
             "fraction_of_gemm_peak": bc_rate * BC_FLOP / 1e9 / peak,
             "pytorch_fraction_of_gemm_peak": pt_bc.map(|p| p * BC_FLOP / 1e9 / peak),
+            "idrex_cpu_iterations_per_s": cpu.map(|c| c.1), "speedup_over_idrex_cpu": cpu.map(|c| bc_rate / c.1),
         },
         "pytorch": torch,
     });

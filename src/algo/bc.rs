@@ -9,7 +9,8 @@ use tch::{Kind, Tensor};
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
 use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
-use crate::nn::{ActorCritic, PolicyConfig, WeightInit};
+use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
+use tch::nn::OptimizerConfig;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -80,31 +81,93 @@ struct Lane {
     sse: f64,
 }
 
-/// Trains a deterministic policy on the (s_t, a_t) pairs of `trajs`, on up to `workers`
-/// threads (the result does not depend on how many: see [`crate::nn::dense`]).
-pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
-    if trajs.iter().all(|t| t.is_empty()) {
-        return Err(Error::Invalid("behavioural cloning needs at least one demonstration step".into()));
+/// The demonstration steps, split into training and validation rows, and the generator
+/// that then draws the batches: what both training paths start from.
+struct Data {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    od: usize,
+    ad: usize,
+    train: Vec<usize>,
+    val: Vec<usize>,
+    rng: ChaCha8Rng,
+}
+
+impl Data {
+    fn new(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<Data> {
+        if trajs.iter().all(|t| t.is_empty()) {
+            return Err(Error::Invalid("behavioural cloning needs at least one demonstration step".into()));
+        }
+        let (x, y, od, ad) = pairs(trajs);
+        let n = x.len() / od;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut idx: Vec<usize> = (0..n).collect();
+        idx.shuffle(&mut rng);
+        let n_val = ((n as f64) * cfg.val_fraction).round() as usize;
+        let n_val = n_val.min(n.saturating_sub(1));
+        let train = idx.split_off(n_val);
+        Ok(Data { x, y, od, ad, train, val: idx, rng })
     }
-    let (x, y, od, ad) = pairs(trajs);
-    let n = x.len() / od;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut idx: Vec<usize> = (0..n).collect();
-    idx.shuffle(&mut rng);
-    let n_val = ((n as f64) * cfg.val_fraction).round() as usize;
-    let n_val = n_val.min(n.saturating_sub(1));
-    let (val, train) = idx.split_at(n_val);
-    let gather = |rows: &[usize], src: &[f32], d: usize| -> Tensor {
+
+    /// The next batch's rows.
+    fn picks(&mut self, batch: usize) -> Vec<usize> {
+        let nt = self.train.len();
+        (0..batch).map(|_| self.train[self.rng.random_range(0..nt)]).collect()
+    }
+
+    fn gather(&self, rows: &[usize], targets: bool) -> Tensor {
+        let (src, d) = if targets { (&self.y, self.ad) } else { (&self.x, self.od) };
         let mut v = Vec::with_capacity(rows.len() * d);
         for &r in rows {
             v.extend_from_slice(&src[r * d..(r + 1) * d]);
         }
         Tensor::from_slice(&v).view([rows.len() as i64, d as i64])
-    };
-    let mut config = PolicyConfig::bc(od, ad);
-    config.hidden = cfg.hidden.clone();
-    config.init = cfg.init;
-    let policy = crate::nn::seeded(seed, || ActorCritic::new(config));
+    }
+
+    fn policy(&self, cfg: &BcConfig, seed: u64) -> ActorCritic {
+        let mut config = PolicyConfig::bc(self.od, self.ad);
+        config.hidden = cfg.hidden.clone();
+        config.init = cfg.init;
+        crate::nn::seeded(seed, || ActorCritic::new(config))
+    }
+
+    /// The losses of a trained policy (on the CPU).
+    fn report(&self, policy: &ActorCritic) -> BcReport {
+        let loss = |rows: &[usize]| mse(policy, &self.gather(rows, false), &self.gather(rows, true)).double_value(&[]);
+        tch::no_grad(|| BcReport {
+            train_steps: self.train.len(),
+            val_steps: self.val.len(),
+            train_loss: loss(&self.train),
+            val_loss: if self.val.is_empty() { f64::NAN } else { loss(&self.val) },
+        })
+    }
+}
+
+fn diverged(it: usize, loss: f64, cfg: &BcConfig) -> Error {
+    Error::Diverged(format!("BC diverged at iteration {it}: the loss is {loss}; lower bc.lr (now {})", cfg.lr))
+}
+
+fn non_finite(cfg: &BcConfig) -> Error {
+    Error::Diverged(format!("BC ended with non-finite weights; lower bc.lr (now {})", cfg.lr))
+}
+
+/// Trains a deterministic policy on the (s_t, a_t) pairs of `trajs`: on the CPU on up to
+/// `workers` threads (the result does not depend on how many: see [`crate::nn::dense`]), or
+/// on the GPU ([`train_torch`]).
+pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize, device: Device) -> Result<(ActorCritic, BcReport)> {
+    match device {
+        Device::Cpu => train_dense(trajs, cfg, seed, workers),
+        Device::Cuda => {
+            device.ensure_available()?;
+            train_torch(trajs, cfg, seed, device.tch())
+        }
+    }
+}
+
+fn train_dense(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
+    let mut data = Data::new(trajs, cfg, seed)?;
+    let (od, ad) = (data.od, data.ad);
+    let policy = data.policy(cfg, seed);
     let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers);
     let mut lanes: Vec<Lane> = (0..LANES)
         .map(|_| Lane {
@@ -116,11 +179,11 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) ->
             sse: 0.0,
         })
         .collect();
-    let nt = train.len();
-    let batch = cfg.batch_size.min(nt);
+    let batch = cfg.batch_size.min(data.train.len());
     let scale = 2.0 / batch as f32;
     for it in 0..cfg.iterations {
-        let picks: Vec<usize> = (0..batch).map(|_| train[rng.random_range(0..nt)]).collect();
+        let picks = data.picks(batch);
+        let (x, y) = (&data.x, &data.y);
         trainer.run(&mut lanes, &picks, |lane, mine, net| {
             lane.grads.fill(0.0);
             lane.sse = 0.0;
@@ -142,20 +205,49 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) ->
         if it % 100 == 0 || it + 1 == cfg.iterations {
             let l = lanes.iter().map(|l| l.sse).sum::<f64>() / batch as f64 + cfg.l2 * trainer.net.weight_l2();
             if !l.is_finite() {
-                return Err(Error::Diverged(format!("BC diverged at iteration {it}: the loss is {l}; lower bc.lr (now {})", cfg.lr)));
+                return Err(diverged(it, l, cfg));
             }
         }
         trainer.step(lanes.iter().map(|l| &l.grads[..]));
     }
     if !trainer.write_to(&policy.actor) {
-        return Err(Error::Diverged(format!("BC ended with non-finite weights; lower bc.lr (now {})", cfg.lr)));
+        return Err(non_finite(cfg));
     }
-    let report = tch::no_grad(|| BcReport {
-        train_steps: train.len(),
-        val_steps: val.len(),
-        train_loss: mse(&policy, &gather(train, &x, od), &gather(train, &y, ad)).double_value(&[]),
-        val_loss: if val.is_empty() { f64::NAN } else { mse(&policy, &gather(val, &x, od), &gather(val, &y, ad)).double_value(&[]) },
-    });
+    let report = data.report(&policy);
+    Ok((policy, report))
+}
+
+/// The same training through libtorch's autograd and Adam on `dev`: the GPU path. It draws
+/// the same batches from the same generator as the CPU path, and so learns the same policy
+/// up to the order of floating-point sums (`tests::torch_path_follows_the_cpu_path`). The
+/// steps stay on the device and a batch is 128 row indices: the host reads the loss back
+/// only every 100 iterations.
+pub(crate) fn train_torch(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, dev: tch::Device) -> Result<(ActorCritic, BcReport)> {
+    let mut data = Data::new(trajs, cfg, seed)?;
+    let mut policy = data.policy(cfg, seed);
+    policy.vs.set_device(dev);
+    let all: Vec<usize> = (0..data.x.len() / data.od).collect();
+    let (xs, ys) = (data.gather(&all, false).to_device(dev), data.gather(&all, true).to_device(dev));
+    let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
+    let _ftz = crate::nn::FlushDenormals::new();
+    let batch = cfg.batch_size.min(data.train.len());
+    for it in 0..cfg.iterations {
+        let picks: Vec<i64> = data.picks(batch).into_iter().map(|r| r as i64).collect();
+        let b = Tensor::from_slice(&picks).to_device(dev);
+        let loss = mse(&policy, &xs.index_select(0, &b), &ys.index_select(0, &b)) + cfg.l2 * policy.actor.weight_l2();
+        if it % 100 == 0 || it + 1 == cfg.iterations {
+            let l = loss.double_value(&[]);
+            if !l.is_finite() {
+                return Err(diverged(it, l, cfg));
+            }
+        }
+        opt.backward_step(&loss);
+    }
+    policy.vs.set_device(tch::Device::Cpu);
+    if !crate::nn::all_finite(&policy.vs) {
+        return Err(non_finite(cfg));
+    }
+    let report = data.report(&policy);
     Ok((policy, report))
 }
 
@@ -181,7 +273,7 @@ mod tests {
         let mut env = Env::new(EnvId::Hopper).unwrap();
         let trajs: Vec<_> = (0..20).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 1500, l2: 0.0, ..Default::default() };
-        let (policy, report) = train(&trajs, &cfg, 0, 1).unwrap();
+        let (policy, report) = train(&trajs, &cfg, 0, 1, Device::Cpu).unwrap();
         // Actions are in [-1, 1]; predicting 0 would cost about sum of E[a^2], far above this.
         let baseline: f64 = trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
             / trajs.iter().map(|t| t.len()).sum::<usize>() as f64;
@@ -204,11 +296,37 @@ mod tests {
         let mut env = Env::new(EnvId::Hopper).unwrap();
         let trajs: Vec<_> = (0..2).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
         let cfg = BcConfig { hidden: vec![32], iterations: 50, batch_size: 37, ..Default::default() };
-        let (pa, a) = train(&trajs, &cfg, 7, 1).unwrap();
+        let (pa, a) = train(&trajs, &cfg, 7, 1, Device::Cpu).unwrap();
         // On two threads, with an odd batch whose lanes are unequal: the same bytes.
-        let (pb, b) = train(&trajs, &cfg, 7, 2).unwrap();
+        let (pb, b) = train(&trajs, &cfg, 7, 2, Device::Cpu).unwrap();
         assert_eq!(a, b);
         let weights = |p: &ActorCritic| crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec();
         assert_eq!(weights(&pa), weights(&pb));
+    }
+
+    /// The GPU path is libtorch's autograd on the device; run here on the CPU, it must learn
+    /// what the CPU path learns, from the same batches, up to the order of float sums, and
+    /// be deterministic itself.
+    #[test]
+    fn torch_path_follows_the_cpu_path() {
+        let mut env = Env::new(EnvId::Hopper).unwrap();
+        let trajs: Vec<_> = (0..3).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 300, batch_size: 50, ..Default::default() };
+        let (dense, dr) = train(&trajs, &cfg, 3, 1, Device::Cpu).unwrap();
+        let (torch, tr) = train_torch(&trajs, &cfg, 3, tch::Device::Cpu).unwrap();
+        let weights = |p: &ActorCritic| crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec();
+        let (a, b) = (weights(&dense), weights(&torch));
+        let worst = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        let scale = a.iter().map(|x| x.abs()).fold(0.0f32, f32::max);
+        assert!(worst < 1e-3 * scale, "weights differ by up to {worst} (largest weight {scale})");
+        assert_eq!((dr.train_steps, dr.val_steps), (tr.train_steps, tr.val_steps));
+        assert!((dr.val_loss - tr.val_loss).abs() < 1e-3 * dr.val_loss, "{dr:?} vs {tr:?}");
+        // And an untrained policy would be far off: the comparison has teeth.
+        let (early, _) = train_torch(&trajs, &BcConfig { iterations: 30, ..cfg.clone() }, 3, tch::Device::Cpu).unwrap();
+        let early_gap = a.iter().zip(&weights(&early)).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+        assert!(early_gap > 100.0 * worst, "{early_gap} vs {worst}");
+        let (again, ar) = train_torch(&trajs, &cfg, 3, tch::Device::Cpu).unwrap();
+        assert_eq!(weights(&again), b);
+        assert_eq!(ar, tr);
     }
 }

@@ -9,12 +9,13 @@
 use rand::seq::IndexedRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tch::nn;
+use tch::nn::{Module, OptimizerConfig};
+use tch::{Kind, Tensor, nn};
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
 use crate::nn::dense::{Buf, Dense, LANES, Scratch, Trainer};
-use crate::nn::{RewardConfig, RewardEnsemble, RewardNet, WeightInit};
+use crate::nn::{Device, RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -248,6 +249,7 @@ pub fn train(
     cfg: &TrexConfig,
     seed: u64,
     workers: usize,
+    device: Device,
 ) -> Result<(RewardEnsemble, Vec<ModelReport>)> {
     if trajs.is_empty() || trajs.len() != ranking.scores.len() {
         return Err(Error::Invalid("T-REX needs one score per trajectory and at least two trajectories".into()));
@@ -262,6 +264,11 @@ pub fn train(
         init: cfg.init,
     };
     let mut model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
+    if device == Device::Cuda {
+        device.ensure_available()?;
+        let reports = train_torch(&mut model, trajs, ranking, cfg, seed, device.tch())?;
+        return Ok((model, reports));
+    }
     let workers = workers.max(1);
     let groups = if workers >= cfg.models { cfg.models } else { 1 };
     let lane_threads = (workers / groups).clamp(1, LANES);
@@ -298,6 +305,24 @@ pub fn train(
     Ok((model, reports))
 }
 
+/// Model `m`'s pairs, of which the first `n_val` are for validation, and the generator that
+/// then draws its batches.
+fn model_pairs(m: usize, trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, seed: u64) -> Result<(Vec<Pair>, usize, ChaCha8Rng)> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
+    let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
+    let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
+    let n_val = n_val.min(pairs.len().saturating_sub(1));
+    Ok((pairs, n_val, rng))
+}
+
+fn diverged(m: usize, it: usize, loss: f64, cfg: &TrexConfig) -> Error {
+    Error::Diverged(format!("T-REX model {m} diverged at iteration {it}: the pair loss is {loss:.3e}; lower trex.lr (now {})", cfg.lr))
+}
+
+fn non_finite(m: usize, cfg: &TrexConfig) -> Error {
+    Error::Diverged(format!("T-REX model {m} has non-finite weights; lower trex.lr (now {})", cfg.lr))
+}
+
 /// Trains model `m` of the ensemble on its own pairs, on `threads` threads.
 fn train_model(
     net: &RewardNet,
@@ -308,10 +333,8 @@ fn train_model(
     seed: u64,
     threads: usize,
 ) -> Result<ModelReport> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed::derive(seed, Purpose::TrexModel, m as u64));
-    let pairs = sample_pairs(trajs, ranking, cfg, cfg.pairs_per_model, &mut rng)?;
-    let n_val = ((pairs.len() as f64) * cfg.val_fraction).round() as usize;
-    let (val, train) = pairs.split_at(n_val.min(pairs.len().saturating_sub(1)));
+    let (pairs, n_val, mut rng) = model_pairs(m, trajs, ranking, cfg, seed)?;
+    let (val, train) = pairs.split_at(n_val);
     let mut trainer = Trainer::new(net, cfg.lr, cfg.l2, threads);
     let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(trainer.net.len())).collect();
     let mut final_loss = f64::NAN;
@@ -325,10 +348,7 @@ fn train_model(
         final_loss = lanes.iter().map(|l| l.ce).sum::<f64>() / picks.len() as f64;
         // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
         if !final_loss.is_finite() || final_loss > 1e3 {
-            return Err(Error::Diverged(format!(
-                "T-REX model {m} diverged at iteration {it}: the pair loss is {final_loss:.3e}; lower trex.lr (now {})",
-                cfg.lr
-            )));
+            return Err(diverged(m, it, final_loss, cfg));
         }
         if it % 50 == 0 || it + 1 == cfg.iterations {
             // As the loss, of the weights before this iteration's step.
@@ -337,7 +357,7 @@ fn train_model(
         }
     }
     if !trainer.write_to(net) {
-        return Err(Error::Diverged(format!("T-REX model {m} has non-finite weights; lower trex.lr (now {})", cfg.lr)));
+        return Err(non_finite(m, cfg));
     }
     let lane = &mut lanes[0];
     Ok(ModelReport {
@@ -348,6 +368,151 @@ fn train_model(
         val_accuracy: accuracy(&trainer.net, trajs, val, cfg.action_input, lane),
         curve,
     })
+}
+
+/// Every pair's window rows as indices into a table of all trajectories' input rows, both
+/// on the device: a batch is then its pair indices alone.
+struct DevicePairs {
+    /// Every step's input row: `[rows, input]`.
+    table: Tensor,
+    /// Per pair, the table rows of its first window then its second, each padded to the
+    /// longest window with the window's first row: `[pairs, 2 * len]`.
+    rows: Tensor,
+    /// 1 for a window's own steps, 0 for padding; None when no window is short.
+    mask: Option<Tensor>,
+    labels: Tensor,
+    len: usize,
+}
+
+impl DevicePairs {
+    fn new(trajs: &[Trajectory], pairs: &[Pair], action_input: bool, dev: tch::Device) -> DevicePairs {
+        let width = trajs[0].obs_dim + if action_input { trajs[0].act_dim } else { 0 };
+        let mut table = Vec::new();
+        let mut offsets = Vec::with_capacity(trajs.len());
+        for t in trajs {
+            offsets.push((table.len() / width) as i64);
+            for s in 0..t.len() {
+                // The reward of step s is paid on s_{s+1}.
+                table.extend_from_slice(t.obs_row(s + 1));
+                if action_input {
+                    table.extend_from_slice(t.action_row(s));
+                }
+            }
+        }
+        let len = pairs.iter().map(|p| p.len).max().unwrap_or(1).max(1);
+        let (mut rows, mut mask) = (Vec::with_capacity(pairs.len() * 2 * len), Vec::with_capacity(pairs.len() * 2 * len));
+        for p in pairs {
+            for (t, start) in [p.a, p.b] {
+                let first = offsets[t] + start as i64;
+                rows.extend((0..len as i64).map(|s| if (s as usize) < p.len { first + s } else { first }));
+                mask.extend((0..len).map(|s| if s < p.len { 1.0f32 } else { 0.0 }));
+            }
+        }
+        let n = pairs.len() as i64;
+        let short = pairs.iter().any(|p| p.len < len);
+        DevicePairs {
+            table: Tensor::from_slice(&table).view([(table.len() / width) as i64, width as i64]).to_device(dev),
+            rows: Tensor::from_slice(&rows).view([n, 2 * len as i64]).to_device(dev),
+            mask: short.then(|| Tensor::from_slice(&mask).view([n, 2, len as i64]).to_device(dev)),
+            labels: Tensor::from_slice(&pairs.iter().map(|p| p.label).collect::<Vec<_>>()).to_device(dev),
+            len,
+        }
+    }
+
+    /// The two windows' predicted returns of the pairs `picks` (indices on the device),
+    /// `[picks, 2]`, and their labels.
+    fn logits(&self, net: &RewardNet, picks: &Tensor) -> (Tensor, Tensor) {
+        let n = picks.size()[0];
+        let x = self.table.index_select(0, &self.rows.index_select(0, picks).view([-1]));
+        let r = net.forward(&x).view([n, 2, self.len as i64]);
+        let r = match &self.mask {
+            Some(mask) => r * mask.index_select(0, picks),
+            None => r,
+        };
+        (r.sum_dim_intlist(-1, false, Kind::Float), self.labels.index_select(0, picks))
+    }
+
+    /// How many of the pairs `picks` the logits rank right (as argmax: the first of equal
+    /// logits wins, as on the CPU).
+    fn correct(logits: &Tensor, labels: &Tensor) -> i64 {
+        logits.argmax(-1, false).eq_tensor(labels).sum(Kind::Int64).int64_value(&[])
+    }
+
+    /// The fraction of the pairs `from..to` ranked right.
+    fn accuracy(&self, net: &RewardNet, from: usize, to: usize) -> f64 {
+        if from == to {
+            return f64::NAN;
+        }
+        let dev = self.rows.device();
+        let correct: i64 = tch::no_grad(|| {
+            (from..to)
+                .step_by(1024)
+                .map(|c| {
+                    let picks = Tensor::arange_start(c as i64, to.min(c + 1024) as i64, (Kind::Int64, dev));
+                    let (logits, labels) = self.logits(net, &picks);
+                    Self::correct(&logits, &labels)
+                })
+                .sum()
+        });
+        correct as f64 / (to - from) as f64
+    }
+}
+
+/// The same training through libtorch's autograd and Adam on `dev`, the models one after
+/// another: the GPU path. Each model draws the same pairs and batches from the same
+/// generator as on the CPU, and so learns the same reward up to the order of floating-point
+/// sums (`tests::torch_path_follows_the_cpu_path`). Pairs and rows live on the device; the
+/// host reads the loss back only at the learning curve's points, every 50 iterations.
+pub(crate) fn train_torch(
+    model: &mut RewardEnsemble,
+    trajs: &[Trajectory],
+    ranking: &Ranking,
+    cfg: &TrexConfig,
+    seed: u64,
+    dev: tch::Device,
+) -> Result<Vec<ModelReport>> {
+    let _ftz = crate::nn::FlushDenormals::new();
+    let mut reports = Vec::with_capacity(model.nets.len());
+    for m in 0..model.nets.len() {
+        let (pairs, n_val, mut rng) = model_pairs(m, trajs, ranking, cfg, seed)?;
+        let n_train = pairs.len() - n_val;
+        let on = DevicePairs::new(trajs, &pairs, cfg.action_input, dev);
+        let (store, net) = (&mut model.stores[m], &model.nets[m]);
+        store.set_device(dev);
+        let mut opt = tch::nn::Adam::default().build(store, cfg.lr)?;
+        let mut curve = Vec::new();
+        let mut final_loss = f64::NAN;
+        for it in 0..cfg.iterations {
+            let picks: Vec<i64> = (0..cfg.batch_size).map(|_| (n_val + rng.random_range(0..n_train)) as i64).collect();
+            let (logits, labels) = on.logits(net, &Tensor::from_slice(&picks).to_device(dev));
+            let ce = logits.cross_entropy_for_logits(&labels);
+            let loss = &ce + cfg.l2 * net.weight_l2();
+            let last = it + 1 == cfg.iterations;
+            if it % 50 == 0 || last {
+                final_loss = ce.double_value(&[]);
+                // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
+                if !final_loss.is_finite() || final_loss > 1e3 {
+                    return Err(diverged(m, it, final_loss, cfg));
+                }
+                let acc = tch::no_grad(|| DevicePairs::correct(&logits, &labels)) as f64 / picks.len() as f64;
+                curve.push(TrexCurvePoint { iteration: it, loss: final_loss, batch_accuracy: acc });
+            }
+            opt.backward_step(&loss);
+        }
+        reports.push(ModelReport {
+            train_pairs: n_train,
+            val_pairs: n_val,
+            final_loss,
+            train_accuracy: on.accuracy(net, n_val, pairs.len()),
+            val_accuracy: on.accuracy(net, 0, n_val),
+            curve,
+        });
+        model.stores[m].set_device(tch::Device::Cpu);
+        if !crate::nn::all_finite(&model.stores[m]) {
+            return Err(non_finite(m, cfg));
+        }
+    }
+    Ok(reports)
 }
 
 #[cfg(test)]
@@ -402,7 +567,7 @@ mod tests {
             l2: 0.0,
             ..Default::default()
         };
-        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 1, 2).unwrap();
+        let (model, reports) = train(&train_set, &Ranking::by_score(scores), &cfg, 1, 2, Device::Cpu).unwrap();
         assert!(reports.iter().all(|r| r.val_accuracy > 0.85), "{reports:?}");
         let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
@@ -431,11 +596,116 @@ mod tests {
             iterations: 40,
             ..Default::default()
         };
-        let runs: Vec<_> = [1, 2, 3, 6].into_iter().map(|w| train(&trajs, &ranking, &cfg, 9, w).unwrap()).collect();
+        let runs: Vec<_> = [1, 2, 3, 6].into_iter().map(|w| train(&trajs, &ranking, &cfg, 9, w, Device::Cpu).unwrap()).collect();
         for (model, reports) in &runs[1..] {
             assert_eq!(weights(model), weights(&runs[0].0));
             assert_eq!(reports, &runs[0].1);
         }
+    }
+
+    /// Trajectories of two lengths (15 and 40 steps), so that a window of 25 is cut short
+    /// in some pairs and the GPU path's padding mask is exercised.
+    fn two_lengths(rng: &mut ChaCha8Rng) -> Vec<Trajectory> {
+        let mut trajs = toy(16, rng);
+        for t in trajs.iter_mut().skip(8) {
+            t.obs.truncate(16 * 3);
+            t.actions.truncate(15);
+            t.rewards.truncate(15);
+            t.terms.truncate(15);
+        }
+        trajs
+    }
+
+    /// The GPU path (libtorch's autograd), run here on the CPU, computes the same loss and
+    /// gradient as the CPU path on the same batch. (Weights are not compared after
+    /// training: where the two windows' sums nearly cancel, a gradient is mostly rounding,
+    /// and Adam's first steps turn that into steps of the full learning rate on either path.)
+    #[test]
+    fn torch_path_computes_the_cpu_paths_gradient() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let trajs = two_lengths(&mut rng);
+        let ranking = Ranking::by_score(trajs.iter().map(|t| t.ret()).collect());
+        let cfg = TrexConfig { hidden: vec![32, 32], pairs_per_model: 300, window: 25, min_margin: 0.5, ..Default::default() };
+        let (pairs, n_val, _) = model_pairs(0, &trajs, &ranking, &cfg, 3).unwrap();
+        assert!(pairs.iter().any(|p| p.len == 15) && pairs.iter().any(|p| p.len == 25));
+        // Torch's default initialisation: larger weights than N(0, 0.02^2), so that the
+        // gradients are well above rounding.
+        let config =
+            RewardConfig { obs_dim: 3, act_dim: None, hidden: cfg.hidden.clone(), models: 1, clip: 100.0, init: WeightInit::TorchDefault };
+        let model = crate::nn::seeded(1, || RewardEnsemble::new(config));
+        let net = &model.nets[0];
+        let picks: Vec<usize> = (n_val..pairs.len()).step_by(7).collect();
+        // The CPU path: one lane, the whole batch.
+        let dense = Dense::from_mlp(net);
+        let mut lane = Lane::new(dense.len());
+        let refs: Vec<&Pair> = picks.iter().map(|&i| &pairs[i]).collect();
+        lane.run(&dense, &trajs, &refs, false, Some(1.0 / picks.len() as f32));
+        // The GPU path's loss and autograd.
+        let on = DevicePairs::new(&trajs, &pairs, false, tch::Device::Cpu);
+        let idx = Tensor::from_slice(&picks.iter().map(|&i| i as i64).collect::<Vec<_>>());
+        let (logits, labels) = on.logits(net, &idx);
+        let ce = logits.cross_entropy_for_logits(&labels);
+        assert!((ce.double_value(&[]) - lane.ce / picks.len() as f64).abs() < 1e-5);
+        assert_eq!(DevicePairs::correct(&logits, &labels) as usize, lane.correct);
+        ce.backward();
+        let grad: Vec<f32> = net
+            .parameters()
+            .flat_map(|(w, b)| {
+                let mut g = Vec::<f32>::try_from(w.grad().flatten(0, -1)).unwrap();
+                g.extend(Vec::<f32>::try_from(b.grad()).unwrap());
+                g
+            })
+            .collect();
+        let norm = |v: &mut dyn Iterator<Item = f32>| v.map(|x| (x as f64).powi(2)).sum::<f64>().sqrt();
+        let diff = norm(&mut grad.iter().zip(lane.grads.iter()).map(|(a, b)| a - b));
+        let size = norm(&mut lane.grads.iter().copied());
+        assert!(size > 1e-3 && diff < 1e-5 * size, "gradients differ: |a - b| = {diff:e}, |a| = {size:e}");
+    }
+
+    /// Trained on the GPU path (here on the CPU), the reward ranks as well as the CPU
+    /// path's, and the path is deterministic.
+    #[test]
+    fn torch_path_learns_as_the_cpu_path_does() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let trajs = two_lengths(&mut rng);
+        let test_set = toy(30, &mut rng);
+        let ranking = Ranking::by_score(trajs.iter().map(|t| t.ret()).collect());
+        let cfg = TrexConfig {
+            hidden: vec![32, 32],
+            models: 2,
+            pairs_per_model: 600,
+            window: 25,
+            min_margin: 1.0,
+            lr: 1e-3,
+            iterations: 300,
+            l2: 0.0,
+            ..Default::default()
+        };
+        let (dense, dr) = train(&trajs, &ranking, &cfg, 3, 2, Device::Cpu).unwrap();
+        let torch_run = || {
+            let config = RewardConfig { obs_dim: 3, act_dim: None, hidden: cfg.hidden.clone(), models: 2, clip: 100.0, init: cfg.init };
+            let mut model = crate::nn::seeded(3, || RewardEnsemble::new(config));
+            let reports = train_torch(&mut model, &trajs, &ranking, &cfg, 3, tch::Device::Cpu).unwrap();
+            (model, reports)
+        };
+        let (torch, tr) = torch_run();
+        let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
+        let rank = |m: &RewardEnsemble| {
+            spearman(&test_set.iter().map(|t| m.predicted_return(t.next_obs(), &t.actions)).collect::<Vec<_>>(), &truth)
+        };
+        let (rd, rt) = (rank(&dense), rank(&torch));
+        assert!(rd > 0.9 && rt > 0.9 && (rd - rt).abs() < 0.05, "held-out spearman: cpu {rd}, torch {rt}");
+        for (d, t) in dr.iter().zip(&tr) {
+            assert_eq!((d.train_pairs, d.val_pairs), (t.train_pairs, t.val_pairs));
+            // The same initial weights and first batch: the same first loss.
+            assert!((d.curve[0].loss - t.curve[0].loss).abs() < 1e-5, "{:?} vs {:?}", d.curve[0], t.curve[0]);
+            let its = |r: &ModelReport| r.curve.iter().map(|c| c.iteration).collect::<Vec<_>>();
+            assert_eq!(its(d), its(t));
+            assert!(t.val_accuracy > 0.85 && (d.val_accuracy - t.val_accuracy).abs() < 0.05, "{d:?} vs {t:?}");
+        }
+        let (again, ar) = torch_run();
+        assert_eq!(weights(&again), weights(&torch));
+        assert_eq!(ar, tr);
     }
 
     #[test]

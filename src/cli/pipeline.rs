@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
+use crate::nn::DeviceChoice;
 use crate::pipeline::graph::{self, PlanFormat};
 use crate::pipeline::runner::{self, Status};
 use crate::pipeline::slurm::{self, NodeState, Submission};
@@ -54,6 +55,10 @@ pub struct RunArgs {
     /// Where the Rerun recording goes (default: recordings/<pipeline>-<env>.rrd).
     #[arg(long)]
     pub recording: Option<PathBuf>,
+    /// Where BC, T-REX and PPO's learned reward compute (overrides the file's `device`;
+    /// `auto` takes the GPU where libtorch sees one). The device is part of those stages' keys.
+    #[arg(long, value_enum)]
+    pub device: Option<DeviceChoice>,
 }
 
 #[derive(Debug, Args)]
@@ -64,6 +69,9 @@ pub struct PlanArgs {
     pub store: Option<String>,
     #[arg(long, value_enum, default_value_t = PlanFormat::Text)]
     pub format: PlanFormat,
+    /// The device to plan for (overrides the file's `device`), as `pipeline run --device`.
+    #[arg(long, value_enum)]
+    pub device: Option<DeviceChoice>,
 }
 
 pub fn run(cmd: &PipelineCommand) -> anyhow::Result<()> {
@@ -81,9 +89,13 @@ pub enum StoreAccess {
     Write,
 }
 
-/// The pipeline file and the store it names (or `store` overrides).
-pub fn load(file: &Path, store: Option<&str>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
+/// The pipeline file (on `device`, where given) and the store it names (or `store` overrides).
+pub fn load(file: &Path, store: Option<&str>, device: Option<DeviceChoice>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
     let p = Pipeline::load(file).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let p = match device {
+        Some(choice) => p.on(choice),
+        None => p,
+    };
     let location = match store {
         Some(s) => Location::parse(s)?,
         None => p.store.clone(),
@@ -101,7 +113,7 @@ fn env_groups<'a, T>(p: &Pipeline, items: &'a [T], name: impl Fn(&T) -> &str) ->
 }
 
 fn status(args: &PlanArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
+    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Read)?;
     store.index()?;
     let g = expand(&p)?;
     let keys = g.keys();
@@ -178,7 +190,7 @@ fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Grap
 }
 
 fn plan(args: &PlanArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Read)?;
+    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Read)?;
     store.index()?;
     let g = expand(&p)?;
     let stored = |k: &str| store.check(k).is_ok();
@@ -217,11 +229,14 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
 }
 
 fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), StoreAccess::Write)?;
+    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Write)?;
     let g = expand(&p)?;
     if args.executor == Executor::Slurm {
         return submit(args, &p, &store, &g);
     }
+    // Before any stage runs: a pipeline planned for CUDA on a machine without it.
+    p.device.ensure_available().map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
+    tracing::info!("BC, T-REX and the learned reward compute on {}", p.device.name());
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true };
     let started = std::time::Instant::now();

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::Args;
 
+use crate::nn::DeviceChoice;
 use crate::store::{Location, Store};
 
 const GIVE_STORE: &str = "give its directory or s3://bucket/prefix with --store";
@@ -85,8 +86,11 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
     let store = existing(&args.store, true, GIVE_STORE)?;
     let mut keep = std::collections::BTreeSet::new();
     for f in &args.files {
-        let (p, _) = super::pipeline::load(f, Some(&args.store), super::pipeline::StoreAccess::Read)?;
-        keep.extend(crate::pipeline::expand(&p)?.keys().into_values());
+        let (p, _) = super::pipeline::load(f, Some(&args.store), None, super::pipeline::StoreAccess::Read)?;
+        // Both devices' artifacts: which one computed them is not this machine's to decide.
+        for device in [DeviceChoice::Cpu, DeviceChoice::Cuda] {
+            keep.extend(crate::pipeline::expand(&p.clone().on(device))?.keys().into_values());
+        }
     }
     // What each doomed artifact is, read before it goes.
     let described: std::collections::BTreeMap<String, String> =

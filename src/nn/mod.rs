@@ -3,12 +3,14 @@
 //! observation at a time, where libtorch's per-call overhead would dominate).
 pub mod cpu;
 pub mod dense;
+pub mod device;
 pub mod mlp;
 pub mod policy;
 pub mod reward;
 pub mod sidecar;
 
 pub use cpu::MlpCpu;
+pub use device::{Device, DeviceChoice};
 pub use mlp::{Activation, Init, Mlp, WeightInit};
 pub use policy::{ActorCritic, PolicyConfig};
 pub use reward::{RewardConfig, RewardEnsemble, RewardNet};
@@ -33,6 +35,11 @@ static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
 pub fn building<T>(f: impl FnOnce() -> T) -> T {
     let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
     f()
+}
+
+/// Whether every variable of `vs` is finite: nothing non-finite is ever published.
+pub fn all_finite(vs: &tch::nn::VarStore) -> bool {
+    tch::no_grad(|| vs.trainable_variables().iter().all(|t| bool::try_from(&t.isfinite().all()).unwrap_or(false)))
 }
 
 /// Makes libtorch's operators single-threaded (a process-wide setting). Their results can

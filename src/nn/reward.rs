@@ -107,14 +107,29 @@ impl RewardEnsemble {
         RewardEnsemble { stores, nets, config, norms }
     }
 
-    /// Network input rows from observations and (if used) actions.
+    /// Moves the networks to `device`, where [`RewardEnsemble::raw`] then computes (PPO's
+    /// learned reward on the GPU).
+    pub fn to_device(&mut self, device: crate::nn::Device) -> Result<()> {
+        device.ensure_available()?;
+        for store in &mut self.stores {
+            store.set_device(device.tch());
+        }
+        Ok(())
+    }
+
+    fn device(&self) -> Device {
+        self.stores.first().map_or(Device::Cpu, nn::VarStore::device)
+    }
+
+    /// Network input rows from observations and (if used) actions, on the networks' device.
     pub fn inputs(&self, obs: &[f32], actions: &[f32]) -> Tensor {
         let n = obs.len() / self.config.obs_dim;
         let o = Tensor::from_slice(obs).view([n as i64, self.config.obs_dim as i64]);
-        match self.config.act_dim {
+        let x = match self.config.act_dim {
             None => o,
             Some(a) => Tensor::cat(&[o, Tensor::from_slice(actions).view([n as i64, a as i64])], 1),
-        }
+        };
+        x.to_device(self.device())
     }
 
     /// Model `m`'s reward per row: `(b, in)` -> `(b)`.
@@ -126,7 +141,9 @@ impl RewardEnsemble {
     pub fn raw(&self, obs: &[f32], actions: &[f32]) -> Vec<Vec<f32>> {
         tch::no_grad(|| {
             let x = self.inputs(obs, actions);
-            (0..self.nets.len()).map(|m| Vec::try_from(self.forward(m, &x).to_kind(Kind::Float)).expect("f32 rewards")).collect()
+            (0..self.nets.len())
+                .map(|m| Vec::try_from(self.forward(m, &x).to_device(Device::Cpu).to_kind(Kind::Float)).expect("f32 rewards"))
+                .collect()
         })
     }
 

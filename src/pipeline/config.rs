@@ -8,6 +8,7 @@ use crate::algo::noise::NoiseProcess;
 use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
 use crate::nn::reward::{Combine, Composition, CtrlAction};
+use crate::nn::{Device, DeviceChoice};
 
 pub const SCHEMA_VERSION: u32 = 1;
 
@@ -235,6 +236,10 @@ pub struct PipelineFile {
     /// What each stage asks Slurm for (`--executor slurm`); not part of any key.
     #[serde(default)]
     pub slurm: SlurmConfig,
+    /// Where BC, T-REX and PPO's learned reward compute: `auto` (the GPU where libtorch
+    /// sees one), `cpu` or `cuda`. A GPU stage has `device: cuda` in its key.
+    #[serde(default)]
+    pub device: DeviceChoice,
 }
 
 /// A Slurm job's resources; unset fields fall back to `slurm.default`, then to the
@@ -322,6 +327,8 @@ pub struct Pipeline {
     pub spec: PipelineFile,
     /// The reward PPO optimises on a learned ensemble.
     pub composition: Composition,
+    /// The file's `device`, resolved on this machine ([`Pipeline::on`] overrides it).
+    pub device: Device,
 }
 
 /// Where a key path is in the YAML text: the line and column of its last key, found by
@@ -518,7 +525,14 @@ impl Pipeline {
         };
         let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
-        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition })
+        let device = spec.device.resolve();
+        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, device })
+    }
+
+    /// This pipeline computing on the device `choice` resolves to (the command line's
+    /// `--device`), whatever its file says.
+    pub fn on(self, choice: DeviceChoice) -> Pipeline {
+        Pipeline { device: choice.resolve(), ..self }
     }
 
     /// This pipeline on one of its environments (with that environment's defaults).

@@ -96,7 +96,7 @@ mod tests {
     fn cores_go_one_per_stage_then_to_the_stages_that_use_more() {
         let bc = |name: &str| Node {
             name: name.into(),
-            params: Params::Bc(stage::bc::BcParams { env: crate::env::EnvId::Hopper, bc: Default::default() }),
+            params: Params::Bc(stage::bc::BcParams { env: crate::env::EnvId::Hopper, bc: Default::default(), device: Default::default() }),
             seed: 0,
             inputs: Default::default(),
         };

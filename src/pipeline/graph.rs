@@ -93,7 +93,7 @@ pub(super) fn io(role: &str, src: &str) -> (String, String) {
 
 /// A T-REX node's parameters for `m` on the given ranked sets.
 pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, cross_level: bool) -> Params {
-    Params::Trex(trex::TrexParams { env: p.env, trex: p.trex_for(m), sets, cross_level })
+    Params::Trex(trex::TrexParams { env: p.env, trex: p.trex_for(m), sets, cross_level, device: p.device })
 }
 
 fn eval_params(p: &Pipeline, method: Method, iteration: usize, run: usize) -> Params {
@@ -109,7 +109,7 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .map(|(r, &seed)| {
             let run = g.push(
                 format!("{prefix}/ppo/{r}"),
-                Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m), reward: p.composition }),
+                Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m), reward: p.composition, device: p.device }),
                 seed,
                 vec![io("reward", reward)],
             );
@@ -169,7 +169,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             g.push("demos", Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }), seed0, vec![io("policy", &d)])
         }
     };
-    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone() }), seed0, vec![io("demos", &demos)]);
+    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone(), device: p.device }), seed0, vec![io("demos", &demos)]);
     if wants(Method::Bc) {
         g.push("bc/eval", eval_params(p, Method::Bc, 0, 0), seed0, vec![io("policy", &bc), io("demos", &demos)]);
     }
@@ -337,6 +337,37 @@ mod tests {
         assert_eq!(expand(&p).unwrap().keys(), expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap().keys());
         let bad = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}slurm:\n  stages:\n    gail: {{cpus: 2}}\n"));
         assert!(bad.unwrap_err().to_string().contains("unknown variant `gail`"));
+    }
+
+    /// The device is part of the definition of the stages it changes, and of nothing else;
+    /// a CPU stage's parameters have no device field, so keys from before the GPU path stay.
+    #[test]
+    fn the_device_is_in_the_keys_of_the_stages_it_changes() {
+        use crate::nn::DeviceChoice;
+        let text = format!("{BASE}slurm:\n  default: {{cpus: 1}}\n");
+        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &text).unwrap();
+        let (cpu, cuda) = (expand(&p.clone().on(DeviceChoice::Cpu)).unwrap(), expand(&p.clone().on(DeviceChoice::Cuda)).unwrap());
+        let on_device = [StageKind::Bc, StageKind::Trex, StageKind::Ppo, StageKind::MultiBcRollouts];
+        for (a, b) in cpu.nodes.iter().zip(&cuda.nodes) {
+            let json = a.params.key_json().to_string();
+            assert!(!json.contains("device"), "{}: {json}", a.name);
+            let mine = on_device.contains(&a.kind());
+            assert_eq!(b.params.key_json().to_string().contains("\"device\":\"cuda\""), mine, "{}", a.name);
+            assert_eq!(a.params.key_json() == b.params.key_json(), !mine, "{}", a.name);
+            // A job planned for CUDA asks Slurm for a GPU; the rest ask for none.
+            let gpus = |n: &Node| crate::pipeline::slurm::job_resources(n, &p.spec.slurm).gpus;
+            assert_eq!((gpus(a), gpus(b)), (None, mine.then_some(1)), "{}", a.name);
+        }
+        // What depends on a GPU stage has other keys too; the demonstrations do not.
+        let (ka, kb) = (cpu.keys(), cuda.keys());
+        assert_eq!(ka["demos"], kb["demos"]);
+        assert_ne!(ka["drex/eval/0"], kb["drex/eval/0"]);
+        // The file's field, and a clear message for a wrong one.
+        let file = |d: &str| Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}device: {d}\n"));
+        assert_eq!(file("cpu").unwrap().device, crate::nn::Device::Cpu);
+        assert_eq!(file("cuda").unwrap().device, crate::nn::Device::Cuda);
+        let e = file("gpu").unwrap_err().to_string();
+        assert!(e.contains("unknown variant `gpu`") && e.contains("`auto`, `cpu`, `cuda`"), "{e}");
     }
 
     #[test]

@@ -257,6 +257,16 @@ fn sbatch_args(
     a
 }
 
+/// What node `n`'s job asks for: its kind's resources, and one GPU for a stage planned for
+/// CUDA unless they say how many.
+pub fn job_resources(n: &super::Node, resources: &SlurmConfig) -> super::config::Resources {
+    let mut res = resources.for_kind(n.kind());
+    if !n.params.device().is_cpu() && res.gpus.is_none() {
+        res.gpus = Some(1);
+    }
+    res
+}
+
 /// Submits every node of `graph` the store lacks and nobody has queued; returns what
 /// happened to each node, in the graph's order. Nothing waits for the jobs.
 pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &SlurmOptions) -> Result<Vec<(String, String, Submission)>> {
@@ -294,7 +304,7 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
                 })?;
                 let deps: Vec<&str> = n.inputs.iter().filter_map(|(_, src)| done.get(src).and_then(Submission::job)).collect();
                 let log = log_dir.join(format!("{}-{}-%j.out", n.name.replace('/', "."), &key[..12]));
-                let args = sbatch_args(&n.name, key, &deps, &resources.for_kind(n.kind()), &store_url, &log, opts);
+                let args = sbatch_args(&n.name, key, &deps, &job_resources(n, resources), &store_url, &log, opts);
                 let id = run(Command::new("sbatch").args(&args), "sbatch")?;
                 let job = id.split(';').next().unwrap_or(&id).to_string();
                 let claim = Claim {

@@ -76,6 +76,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                     bc: s.bc.clone(),
                     schedule: s.idrex.multi_bc_schedule.clone(),
                     rollouts_per_level: s.idrex.multi_bc_rollouts_per_level,
+                    device: p.device,
                 })
             }
         };

@@ -10,7 +10,7 @@ use crate::algo::bc::{self, BcConfig};
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::nn::RewardEnsemble;
+use crate::nn::{Device, RewardEnsemble};
 use crate::pipeline::stage::{DegradationLevel, REWARD, StageCtx, degradation, load_policy_for, read_rollouts};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -22,6 +22,9 @@ pub struct Params {
     pub bc: BcConfig,
     pub schedule: Vec<f64>,
     pub rollouts_per_level: usize,
+    /// Where the clones train; absent (the CPU) from a CPU stage's parameters and key.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 /// The filter's decision on one clone.
@@ -61,7 +64,8 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
             seed::derive(ctx.seed, Purpose::CloneDemo, r64),
             TrajMeta { source: format!("multi-bc/{r}/demo"), ..Default::default() },
         );
-        let (clone, _) = bc::train(std::slice::from_ref(&demo), &p.bc, seed::derive(ctx.seed, Purpose::CloneTraining, r64), ctx.threads)?;
+        let (clone, _) =
+            bc::train(std::slice::from_ref(&demo), &p.bc, seed::derive(ctx.seed, Purpose::CloneTraining, r64), ctx.threads, p.device)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r64);
         let trajs = rollout::epsilon_greedy(&mut env, &clone, &p.schedule, p.rollouts_per_level, seed, &meta);

@@ -3,18 +3,22 @@ use super::{POLICY, StageCtx, read_rollouts};
 use crate::algo::bc::{self, BcConfig, BcReport};
 use crate::env::EnvId;
 use crate::error::Result;
+use crate::nn::Device;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BcParams {
     pub env: EnvId,
     pub bc: BcConfig,
+    /// Where it computes; absent (the CPU) from a CPU stage's parameters, and so its key.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 pub fn run(p: &BcParams, ctx: &StageCtx) -> Result<BcReport> {
     let trajs = read_rollouts(ctx.input("demos")?)?;
     ctx.progress.set_message("behavioural cloning");
-    let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed, ctx.threads)?;
+    let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed, ctx.threads, p.device)?;
     policy.env = Some(p.env.name().to_string());
     policy.save(&ctx.out.join(POLICY), serde_json::to_value(&p.bc).unwrap_or_default())?;
     Ok(report)

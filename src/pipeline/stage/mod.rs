@@ -39,7 +39,7 @@ use crate::data::Trajectory;
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::log::mcap;
-use crate::nn::ActorCritic;
+use crate::nn::{ActorCritic, Device};
 use crate::stats::ReturnStats;
 
 pub const ROLLOUTS: &str = "rollouts.mcap";
@@ -133,6 +133,19 @@ impl Params {
         match self {
             Params::DemosImport(p) => serde_json::json!({ "env": p.env, "sha256": p.sha256 }),
             _ => self.to_json(),
+        }
+    }
+}
+
+impl Params {
+    /// The device the stage computes on (the CPU for kinds that have no choice).
+    pub fn device(&self) -> Device {
+        match self {
+            Params::Bc(p) => p.device,
+            Params::Trex(p) => p.device,
+            Params::Ppo(p) => p.device,
+            Params::MultiBcRollouts(p) => p.device,
+            _ => Device::Cpu,
         }
     }
 }

@@ -6,8 +6,8 @@ use super::{POLICY, REWARD, StageCtx, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
 use crate::env::EnvId;
 use crate::error::Result;
-use crate::nn::RewardEnsemble;
 use crate::nn::reward::Composition;
+use crate::nn::{Device, RewardEnsemble};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -16,6 +16,10 @@ pub struct PpoParams {
     pub ppo: PpoConfig,
     /// How the learned reward is composed.
     pub reward: Composition,
+    /// Where the learned reward is computed; absent (the CPU) from a CPU stage's parameters
+    /// and key.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 /// One point of the learning curve: the mean true and learned returns of the training
@@ -38,7 +42,8 @@ pub const CURVE: &str = "curve.csv";
 
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
-    let reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    let mut reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    reward.to_device(p.device)?;
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut on_update = |u: &ppo::PpoProgress| {
         show(u);

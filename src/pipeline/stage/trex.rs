@@ -8,6 +8,7 @@ use crate::algo::trex::{self, ModelReport, Ranking, TrexConfig};
 use crate::data::Trajectory;
 use crate::env::EnvId;
 use crate::error::Result;
+use crate::nn::Device;
 use crate::stats::{nan_as_null, pearson, spearman};
 
 /// How one ranked input set takes part.
@@ -28,6 +29,9 @@ pub struct TrexParams {
     /// One entry per input `set<i>`, in order.
     pub sets: Vec<RankedSet>,
     pub cross_level: bool,
+    /// Where it computes; absent (the CPU) from a CPU stage's parameters, and so its key.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 /// Predicted against true returns of a set of trajectories.
@@ -74,7 +78,7 @@ pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
         }
     }
     ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
-    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed, ctx.threads)?;
+    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed, ctx.threads, p.device)?;
     model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
     let score = |ts: &[Trajectory]| Scored {
         predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
