@@ -662,8 +662,8 @@ mod tests {
         assert!(size > 1e-3 && diff < 1e-5 * size, "gradients differ: |a - b| = {diff:e}, |a| = {size:e}");
     }
 
-    /// Trained on the GPU path (here on the CPU), the reward ranks as well as the CPU
-    /// path's, and the path is deterministic.
+    /// Trained on the GPU path (here on the CPU), the reward predicts the CPU path's returns
+    /// (up to a shift) and ranks as well, and the path is deterministic.
     #[test]
     fn torch_path_learns_as_the_cpu_path_does() {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
@@ -689,12 +689,20 @@ mod tests {
             (model, reports)
         };
         let (torch, tr) = torch_run();
-        let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
-        let rank = |m: &RewardEnsemble| {
-            spearman(&test_set.iter().map(|t| m.predicted_return(t.next_obs(), &t.actions)).collect::<Vec<_>>(), &truth)
+        // Predicted returns less their mean: the output bias, whose gradient is mostly
+        // rounding (windows of equal length), drifts differently on the two paths and
+        // shifts every 40-step return alike, which no ranking sees.
+        let centred = |m: &RewardEnsemble| {
+            let v: Vec<f64> = test_set.iter().map(|t| m.predicted_return(t.next_obs(), &t.actions)).collect();
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            v.into_iter().map(|x| x - mean).collect::<Vec<_>>()
         };
-        let (rd, rt) = (rank(&dense), rank(&torch));
-        assert!(rd > 0.9 && rt > 0.9 && (rd - rt).abs() < 0.05, "held-out spearman: cpu {rd}, torch {rt}");
+        let (pd, pt) = (centred(&dense), centred(&torch));
+        let rms = |v: Vec<f64>| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        let (gap, spread) = (rms(pd.iter().zip(&pt).map(|(a, b)| a - b).collect()), rms(pd.clone()));
+        assert!(gap < 1e-2 * spread, "predicted returns differ by {gap} (spread {spread})");
+        let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
+        assert!(spearman(&pd, &truth) > 0.9 && spearman(&pt, &truth) > 0.9);
         for (d, t) in dr.iter().zip(&tr) {
             assert_eq!((d.train_pairs, d.val_pairs), (t.train_pairs, t.val_pairs));
             // The same initial weights and first batch: the same first loss.
