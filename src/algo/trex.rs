@@ -461,7 +461,7 @@ impl DevicePairs {
 /// The same training through libtorch's autograd and Adam on `dev`, the models one after
 /// another: the GPU path. Each model draws the same pairs and batches from the same
 /// generator as on the CPU, and so learns the same reward up to the order of floating-point
-/// sums (`tests::torch_path_follows_the_cpu_path`). Pairs and rows live on the device; the
+/// sums (`tests::torch_path_learns_as_the_cpu_path_does`). Pairs and rows live on the device; the
 /// host reads the loss back only at the learning curve's points, every 50 iterations.
 pub(crate) fn train_torch(
     model: &mut RewardEnsemble,

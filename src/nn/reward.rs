@@ -117,7 +117,8 @@ impl RewardEnsemble {
         Ok(())
     }
 
-    fn device(&self) -> Device {
+    /// Where the networks are (libtorch's device).
+    fn tch_device(&self) -> Device {
         self.stores.first().map_or(Device::Cpu, nn::VarStore::device)
     }
 
@@ -129,7 +130,7 @@ impl RewardEnsemble {
             None => o,
             Some(a) => Tensor::cat(&[o, Tensor::from_slice(actions).view([n as i64, a as i64])], 1),
         };
-        x.to_device(self.device())
+        x.to_device(self.tch_device())
     }
 
     /// Model `m`'s reward per row: `(b, in)` -> `(b)`.
