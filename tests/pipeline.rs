@@ -440,6 +440,27 @@ fn bytes_depend_on_the_key_alone() {
     assert!(stdout(&v).contains("curve.csv") && stdout(&v).contains("28 recomputed, 1 differ"), "{}", stdout(&v));
 }
 
+/// Another processor's MKL kernels sum in another order: artifacts computed on MKL's SSE4.2
+/// code path (as an old machine would) differ when recomputed here, and verify says why.
+#[test]
+fn verify_tells_a_machine_difference_from_a_defect() {
+    let dir = TempDir::new("code-path");
+    let store = dir.join("store");
+    let out = Command::new(env!("CARGO_BIN_EXE_idrex"))
+        .args(["pipeline", "run", repo("pipelines/smoke.yaml").to_str().unwrap(), "--store", store.to_str().unwrap()])
+        .args(["--recording", dir.join("r.rrd").to_str().unwrap()])
+        .env("MKL_ENABLE_INSTRUCTIONS", "SSE4_2")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let manifests: Vec<String> = artifact_dirs(&store).iter().map(|d| std::fs::read_to_string(d.join("manifest.json")).unwrap()).collect();
+    assert!(manifests.iter().all(|m| m.contains("\"cpu_code_path\": \"sse4_2\"")), "{}", manifests[0]);
+    let v = idrex(&["verify", "--store", store.to_str().unwrap(), "--recompute"]);
+    assert!(!v.status.success());
+    assert!(stdout(&v).contains("(computed on MKL's sse4_2 code path)"), "{}", stdout(&v));
+    assert!(stderr(&v).contains("set MKL_CBWR to one branch on every machine"), "{}", stderr(&v));
+}
+
 #[test]
 fn runs_in_two_pid_namespaces_share_a_store() {
     // Where unshare works (root, or user namespaces allowed): one run sees other pids than

@@ -61,17 +61,29 @@ pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
             n => n.parse::<usize>().map_err(|_| anyhow::anyhow!("--recompute {n}: give a number of artifacts, or nothing for all"))?,
         };
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let mut differ = 0;
+        let (mut differ, mut elsewhere) = (0, std::collections::BTreeSet::new());
         for k in keys.iter().take(n) {
             let r = crate::pipeline::recompute::recompute(&store, k, threads)?;
             if r.differing.is_empty() {
                 println!("same    {} {}", &k[..12], r.node);
             } else {
                 differ += 1;
-                println!("DIFFERS {} {}: {}", &k[..12], r.node, r.differing.join(", "));
+                let on = r.computed_on.as_ref().map_or(String::new(), |p| format!(" (computed on MKL's {p} code path)"));
+                println!("DIFFERS {} {}: {}{on}", &k[..12], r.node, r.differing.join(", "));
+                elsewhere.extend(r.computed_on);
             }
         }
         println!("{} recomputed, {differ} differ", n.min(keys.len()));
+        let here = crate::nn::device::cpu_code_path();
+        if !elsewhere.is_empty() {
+            let paths: Vec<&str> = elsewhere.iter().map(String::as_str).collect();
+            bail!(
+                "{differ} artifacts changed when recomputed; artifacts computed on MKL's {} code path were recomputed on {here}, \
+                 whose kernels sum in another order: set MKL_CBWR to one branch on every machine that shares the store \
+                 (e.g. MKL_CBWR=AVX2) to make them agree",
+                paths.join(", ")
+            );
+        }
         if differ > 0 {
             bail!("{differ} artifacts changed when recomputed: their bytes do not depend on their key alone");
         }

@@ -61,6 +61,10 @@ pub struct Manifest {
     pub ended_unix: f64,
     pub wall_s: f64,
     pub idrex_version: String,
+    /// MKL's instruction-set code path where it was computed ([`crate::nn::device::cpu_code_path`]);
+    /// absent from manifests written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_code_path: Option<String>,
 }
 
 /// The key of a stage instance.
@@ -750,6 +754,7 @@ mod tests {
             ended_unix: 0.0,
             wall_s: 0.0,
             idrex_version: "test".into(),
+            cpu_code_path: None,
         }
     }
 
