@@ -291,6 +291,11 @@ mod tests {
         assert!(err / (fresh.len() as f64) < 0.05 * baseline);
     }
 
+    /// Every parameter of a policy's actor, flat.
+    fn weights(p: &ActorCritic) -> Vec<f32> {
+        crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec()
+    }
+
     #[test]
     fn is_deterministic_for_a_seed() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
@@ -300,7 +305,6 @@ mod tests {
         // On two threads, with an odd batch whose lanes are unequal: the same bytes.
         let (pb, b) = train(&trajs, &cfg, 7, 2, Device::Cpu).unwrap();
         assert_eq!(a, b);
-        let weights = |p: &ActorCritic| crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec();
         assert_eq!(weights(&pa), weights(&pb));
     }
 
@@ -331,7 +335,6 @@ mod tests {
         let far = gap(&dense, &early);
         assert!(far > 10.0 * close, "{far} vs {close}");
         let (again, ar) = train_torch(&trajs, &cfg, 3, tch::Device::Cpu).unwrap();
-        let weights = |p: &ActorCritic| crate::nn::dense::Dense::from_mlp(&p.actor).params.to_vec();
         assert_eq!(weights(&again), weights(&torch));
         assert_eq!(ar, tr);
     }

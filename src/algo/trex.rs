@@ -157,6 +157,17 @@ pub fn sample_pairs(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, n
 /// units per layer) then stay in L2.
 const CHUNK_PAIRS: usize = 2;
 
+/// Appends the reward network's input rows of `t`'s steps `steps` to `x`.
+fn push_inputs(t: &Trajectory, steps: std::ops::Range<usize>, action_input: bool, x: &mut Vec<f32>) {
+    for s in steps {
+        // The reward of step s is paid on s_{s+1}.
+        x.extend_from_slice(t.obs_row(s + 1));
+        if action_input {
+            x.extend_from_slice(t.action_row(s));
+        }
+    }
+}
+
 /// Writes the input rows of `pairs` (each pair's first window, then its second) into `x`;
 /// returns the number of rows.
 fn fill_rows(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool, x: &mut Vec<f32>) -> usize {
@@ -164,14 +175,7 @@ fn fill_rows(trajs: &[Trajectory], pairs: &[&Pair], action_input: bool, x: &mut 
     let mut rows = 0;
     for p in pairs {
         for (ti, start) in [p.a, p.b] {
-            let t = &trajs[ti];
-            for s in start..start + p.len {
-                // The reward of step s is paid on s_{s+1}.
-                x.extend_from_slice(t.obs_row(s + 1));
-                if action_input {
-                    x.extend_from_slice(t.action_row(s));
-                }
-            }
+            push_inputs(&trajs[ti], start..start + p.len, action_input, x);
             rows += p.len;
         }
     }
@@ -391,13 +395,7 @@ impl DevicePairs {
         let mut offsets = Vec::with_capacity(trajs.len());
         for t in trajs {
             offsets.push((table.len() / width) as i64);
-            for s in 0..t.len() {
-                // The reward of step s is paid on s_{s+1}.
-                table.extend_from_slice(t.obs_row(s + 1));
-                if action_input {
-                    table.extend_from_slice(t.action_row(s));
-                }
-            }
+            push_inputs(t, 0..t.len(), action_input, &mut table);
         }
         let len = pairs.iter().map(|p| p.len).max().unwrap_or(1).max(1);
         let (mut rows, mut mask) = (Vec::with_capacity(pairs.len() * 2 * len), Vec::with_capacity(pairs.len() * 2 * len));
@@ -487,8 +485,7 @@ pub(crate) fn train_torch(
             let (logits, labels) = on.logits(net, &Tensor::from_slice(&picks).to_device(dev));
             let ce = logits.cross_entropy_for_logits(&labels);
             let loss = &ce + cfg.l2 * net.weight_l2();
-            let last = it + 1 == cfg.iterations;
-            if it % 50 == 0 || last {
+            if it % 50 == 0 || it + 1 == cfg.iterations {
                 final_loss = ce.double_value(&[]);
                 // A pair's cross-entropy starts near ln 2; far above it the model is not learning.
                 if !final_loss.is_finite() || final_loss > 1e3 {
