@@ -1,10 +1,16 @@
 //! Bakes the run-time library paths of the bootstrap environment into every binary and test
 //! (rpath), so that `idrex` runs without LD_LIBRARY_PATH, and records where gymnasium's MuJoCo
 //! model files were at build time as the default asset directory.
+//!
+//! Every clone on a machine shares one cargo target directory (the dependency build), and
+//! cargo's fingerprint of this crate compares file times, so a clone whose files are older
+//! than another clone's build would reuse that build. `IDREX_CLONE` (the clone's path, set
+//! by the `.cargo/config.toml` that scripts/bootstrap.sh writes) is tracked here: building
+//! in another clone reruns this script, and with it the idrex crate's compilation (only it).
 use std::path::Path;
 
 fn main() {
-    for var in ["LIBTORCH", "MUJOCO_DYNAMIC_LINK_DIR", "IDREX_DEFAULT_ASSETS", "IDREX_DEFAULT_PYTHON"] {
+    for var in ["LIBTORCH", "MUJOCO_DYNAMIC_LINK_DIR", "IDREX_DEFAULT_ASSETS", "IDREX_DEFAULT_PYTHON", "IDREX_CLONE"] {
         println!("cargo:rerun-if-env-changed={var}");
     }
     let canon = |p: &Path| std::fs::canonicalize(p).ok();

@@ -45,6 +45,7 @@ LIBTORCH = "$env_dir/torch"
 MUJOCO_DYNAMIC_LINK_DIR = "$env_dir/lib"
 IDREX_DEFAULT_ASSETS = "$env_dir/mujoco-assets"
 IDREX_DEFAULT_PYTHON = "$env_dir/venv/bin/python"
+IDREX_CLONE = "$repo"
 CFG
   # Rewrite only on change, so cargo's view of the configuration stays stable.
   if cmp -s "$tmp" "$cfg"; then rm -f "$tmp"; else mv -f "$tmp" "$cfg"; fi

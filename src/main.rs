@@ -12,6 +12,10 @@ fn main() -> ExitCode {
     // SAFETY: restoring the default disposition of a signal, before any thread starts.
     unsafe { signal(13, 0) };
     let cli = idrex::cli::Cli::parse();
+    if let Err(e) = idrex::nn::gemm::Kernel::from_env() {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
     idrex::cli::init_tracing(cli.verbose);
     match idrex::cli::run(cli) {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,6 +1,7 @@
-//! Every clone builds and tests exactly its own sources, although all clones on a machine
-//! share one cargo target directory (see `dev`): two clones with different sources, the
-//! second with files older than the first's build, each get a binary of their own code.
+//! Every clone builds and tests exactly its own sources, through `./dev` or plain cargo,
+//! although all clones on a machine share one cargo target directory (see `build.rs`): two
+//! clones with different sources, the second with files older than the first's build, each
+//! get a binary of their own code.
 use std::path::Path;
 use std::process::Command;
 
@@ -9,19 +10,46 @@ fn git(dir: &Path, args: &[&str]) {
     assert!(out.status.success(), "git {args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
-fn help(clone: &Path) -> String {
-    // A developer's environment, not cargo test's: build scripts rerun when variables that
-    // cargo sets for tests differ, which would rebuild the dependencies.
-    let mut cmd = Command::new(clone.join("dev"));
-    cmd.arg("--help").env_clear();
+/// A developer's environment, not cargo test's: build scripts rerun when variables that
+/// cargo sets for tests differ, which would rebuild the dependencies.
+fn developer(program: &Path, dir: &Path) -> Command {
+    let mut cmd = Command::new(program);
+    cmd.current_dir(dir).env_clear();
     for var in ["PATH", "HOME", "CARGO_HOME", "RUSTUP_HOME", "IDREX_CACHE", "IDREX_PYTHON", "XDG_CACHE_HOME"] {
         if let Some(v) = std::env::var_os(var) {
             cmd.env(var, v);
         }
     }
+    cmd
+}
+
+fn stdout(mut cmd: Command) -> String {
     let out = cmd.output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{cmd:?}: {}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// `idrex --help` as `./dev --help` builds and runs it.
+fn dev_help(clone: &Path) -> String {
+    let mut cmd = developer(&clone.join("dev"), clone);
+    cmd.arg("--help");
+    stdout(cmd)
+}
+
+/// `idrex --help` from plain `cargo build --release` (after the set-up, which writes the
+/// clone's .cargo/config.toml), run from the target directory cargo built it in.
+fn cargo_help(clone: &Path) -> String {
+    stdout(developer(&clone.join("scripts/bootstrap.sh"), clone));
+    let mut build = developer(Path::new("cargo"), clone);
+    build.args(["build", "--release", "--quiet", "--bin", "idrex"]);
+    stdout(build);
+    let mut dir = developer(Path::new("cargo"), clone);
+    dir.args(["metadata", "--format-version", "1", "--no-deps"]);
+    let meta: serde_json::Value = serde_json::from_str(&stdout(dir)).unwrap();
+    let bin = Path::new(meta["target_directory"].as_str().unwrap()).join("release/idrex");
+    let mut help = developer(&bin, clone);
+    help.arg("--help");
+    stdout(help)
 }
 
 #[test]
@@ -46,8 +74,9 @@ fn each_clone_builds_its_own_sources() {
         .status()
         .unwrap();
     assert!(old.success());
-    assert!(help(&a).contains("CLONE-A-MARK"), "clone a runs its own code");
-    assert!(!help(&b).contains("CLONE-A-MARK"), "clone b runs its own code, not clone a's newer build");
-    assert!(help(&a).contains("CLONE-A-MARK"), "and back");
+    assert!(dev_help(&a).contains("CLONE-A-MARK"), "clone a runs its own code");
+    assert!(!cargo_help(&b).contains("CLONE-A-MARK"), "plain cargo in clone b builds its own code, not clone a's newer build");
+    assert!(cargo_help(&a).contains("CLONE-A-MARK"), "and back, with plain cargo");
+    assert!(!dev_help(&b).contains("CLONE-A-MARK"), "and ./dev in clone b");
     std::fs::remove_dir_all(&base).unwrap();
 }

@@ -2,8 +2,9 @@
 //! (scripts/services.sh): Slurm from Debian packages and SeaweedFS's S3 server. One test in
 //! a binary of its own, because the services are machine-wide (one slurmctld, fixed ports).
 //!
-//! Where a service cannot start, the test says so and passes, unless IDREX_REQUIRE_SERVICES
-//! is set (CI sets it: there, a skip is a failure).
+//! Where a service cannot start, the test says so on the terminal and passes, unless
+//! IDREX_REQUIRE_SERVICES is set (CI sets it: there, a skip is a failure). The binary has no
+//! test harness (`harness = false`), so that the skip is printed, not captured by cargo.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -80,8 +81,32 @@ fn submitted(out: &str) -> Vec<String> {
     out.lines().filter(|l| l.starts_with("submitted ")).map(|l| l.split_whitespace().nth(1).unwrap().to_string()).collect()
 }
 
-#[test]
-fn pipelines_run_as_slurm_jobs_against_an_s3_store() {
+const NAME: &str = "pipelines_run_as_slurm_jobs_against_an_s3_store";
+
+/// A test binary's command line as cargo test and nextest pass it: `--list` lists the test,
+/// a name filter that does not match it runs nothing, other flags are accepted and ignored.
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.iter().any(|a| a == "--list") {
+        println!("{NAME}: test");
+        return;
+    }
+    let ignored = args.iter().any(|a| a == "--ignored");
+    let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
+    let exact = args.iter().any(|a| a == "--exact");
+    let selected = filters.is_empty() || filters.iter().any(|f| if exact { f.as_str() == NAME } else { NAME.contains(f.as_str()) });
+    if ignored || !selected {
+        println!("running 0 tests (cluster: {NAME} not selected)");
+        return;
+    }
+    println!("running 1 test (cluster: {NAME})");
+    if pipelines_run_as_slurm_jobs_against_an_s3_store() {
+        println!("test {NAME} ... ok");
+    }
+}
+
+/// False where it was skipped.
+fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     let base = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("cluster-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
     std::fs::create_dir_all(&base).unwrap();
@@ -97,8 +122,11 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() {
     if !started.status.success() {
         let why = text(&started);
         assert!(std::env::var_os("IDREX_REQUIRE_SERVICES").is_none(), "the services did not start (IDREX_REQUIRE_SERVICES is set): {why}");
-        eprintln!("SKIPPED the Slurm and S3 tests: the services did not start: {why}");
-        return;
+        println!(
+            "test {NAME} ... SKIPPED: the Slurm and S3 services did not start (`scripts/services.sh install` installs them): {}",
+            why.trim().lines().last().unwrap_or("")
+        );
+        return false;
     }
     // SAFETY: the only test of this binary; set before any thread reads the environment.
     unsafe {
@@ -231,4 +259,5 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() {
     assert!(removed > 0 && removed < 28, "{gc}");
     let verified = ok(idrex(&base, &["verify", "--store", &s3("a")]));
     assert!(verified.contains(&format!("{} artifacts, 0 corrupt", 28 - removed)), "{verified}");
+    true
 }

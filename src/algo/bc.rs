@@ -311,7 +311,10 @@ mod tests {
     /// The GPU path is libtorch's autograd on the device; run here on the CPU, it must learn
     /// what the CPU path learns from the same batches, and be deterministic itself. (Their
     /// weights are compared through the actions: where a gradient is mostly rounding, Adam
-    /// turns the two paths' different rounding into different full-size steps.)
+    /// turns the two paths' different rounding into different full-size steps. The two round
+    /// differently anyway: idrex's products are chains of fused multiply-adds, libtorch's
+    /// MKL's; after 300 steps their actions differ by 0.24 % of the actions' size, against
+    /// 20 % for the CPU path a tenth of the way through.)
     #[test]
     fn torch_path_follows_the_cpu_path() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
@@ -327,9 +330,9 @@ mod tests {
         };
         let spread = tch::no_grad(|| dense.mean(&obs).square().mean(Kind::Float).sqrt().double_value(&[]));
         let close = gap(&dense, &torch);
-        assert!(close < 1e-3 * spread, "actions differ by {close} (rms action {spread})");
+        assert!(close < 1e-2 * spread, "actions differ by {close} (rms action {spread})");
         assert_eq!((dr.train_steps, dr.val_steps), (tr.train_steps, tr.val_steps));
-        assert!((dr.val_loss - tr.val_loss).abs() < 1e-3 * dr.val_loss, "{dr:?} vs {tr:?}");
+        assert!((dr.val_loss - tr.val_loss).abs() < 1e-2 * dr.val_loss, "{dr:?} vs {tr:?}");
         // Teeth: the CPU path a tenth of the way through is much further off.
         let (early, _) = train(&trajs, &BcConfig { iterations: 30, ..cfg.clone() }, 3, 1, Device::Cpu).unwrap();
         let far = gap(&dense, &early);

@@ -1,113 +1,27 @@
 //! Training of ReLU MLPs (the BC policy, the T-REX reward nets) with explicit forward and
-//! backward passes over MKL's `sgemm`, the BLAS inside the libtorch idrex already links.
+//! backward passes over idrex's own matrix product ([`super::gemm`]), and inference of
+//! those networks on the CPU (the learned reward in PPO, evaluation and multi-BC).
 //!
 //! Why not autograd: at these shapes (256 units, batches of 128 rows for BC and 6,400 for
 //! T-REX) libtorch spends a third to a half of each step outside its matrix products, in
 //! per-operator dispatch, allocation and passes over activations too large for the cache.
-//! Here every product goes straight to `sgemm`, activations live in reused 64-byte-aligned
+//! Here every product goes straight to the kernel, activations live in reused 64-byte-aligned
 //! buffers, and callers feed batches in chunks of a few hundred rows, which stay in L2.
 //!
-//! Results are deterministic: `sgemm` runs sequentially on the calling thread
-//! ([`SequentialBlas`]), buffers are aligned the same way on every run (MKL's code path may
-//! depend on alignment), and [`Trainer`] splits each batch into a fixed partition
-//! ([`LANES`]) whose gradients it sums in a fixed order, whatever the number of threads that
-//! compute them.
+//! Results are the same bits on every processor and thread count: the products and the
+//! elementwise passes sum in an order fixed by the shapes, and [`Trainer`] splits each batch
+//! into a fixed partition ([`LANES`]) whose gradients it sums in a fixed order, whatever the
+//! number of threads that compute them.
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
-use std::os::raw::{c_char, c_int};
-
 use tch::Tensor;
 
+use super::gemm::Kernel;
+pub use super::gemm::gemm;
 use super::{Activation, FlushDenormals, Mlp};
 
 /// Every batch is split into this many lanes, whose gradients are summed in lane order; a
 /// lane is the unit of parallelism, so bytes do not depend on how many threads there are.
 pub const LANES: usize = 2;
-
-#[link(name = "torch_cpu")]
-unsafe extern "C" {
-    /// Fortran BLAS (LP64) single-precision matrix product, column-major.
-    fn sgemm_(
-        transa: *const c_char,
-        transb: *const c_char,
-        m: *const c_int,
-        n: *const c_int,
-        k: *const c_int,
-        alpha: *const f32,
-        a: *const f32,
-        lda: *const c_int,
-        b: *const f32,
-        ldb: *const c_int,
-        beta: *const f32,
-        c: *mut f32,
-        ldc: *const c_int,
-    );
-    /// MKL's C interface (by value; the lower-case symbol is the Fortran one, by reference).
-    fn MKL_Set_Num_Threads_Local(n: c_int) -> c_int;
-}
-
-/// While alive, MKL runs sequentially on the calling thread (restored on drop): a product
-/// split over threads would sum in a thread-dependent order and spin against our own threads.
-pub struct SequentialBlas {
-    saved: c_int,
-}
-
-impl SequentialBlas {
-    pub fn new() -> Self {
-        // SAFETY: sets a thread-local MKL setting.
-        SequentialBlas { saved: unsafe { MKL_Set_Num_Threads_Local(1) } }
-    }
-}
-
-impl Default for SequentialBlas {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Drop for SequentialBlas {
-    fn drop(&mut self) {
-        // SAFETY: as above; 0 restores "follow the global setting".
-        unsafe { MKL_Set_Num_Threads_Local(self.saved) };
-    }
-}
-
-/// Row-major `C (m x n) = op(A) op(B) + beta C`, with `op` a transpose where asked, leading
-/// dimensions `lda`, `ldb`, `ldc` (elements between rows).
-#[allow(clippy::too_many_arguments)]
-pub fn gemm(
-    ta: bool,
-    tb: bool,
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    lda: usize,
-    b: &[f32],
-    ldb: usize,
-    beta: f32,
-    c: &mut [f32],
-    ldc: usize,
-) {
-    if m == 0 || n == 0 {
-        return;
-    }
-    // op(A) is m x k: A is stored m x k (lda >= k) or, transposed, k x m (lda >= m).
-    let (ar, ac) = if ta { (k, m) } else { (m, k) };
-    let (br, bc) = if tb { (n, k) } else { (k, n) };
-    let need = |rows: usize, cols: usize, ld: usize| if rows == 0 { 0 } else { (rows - 1) * ld + cols };
-    assert!(lda >= ac && ldb >= bc && ldc >= n, "gemm: a leading dimension is shorter than its row");
-    assert!(a.len() >= need(ar, ac, lda) && b.len() >= need(br, bc, ldb) && c.len() >= need(m, n, ldc), "gemm: a buffer is too short");
-    let as_int = |x: usize| c_int::try_from(x).expect("gemm dimensions fit in 32 bits");
-    // Row-major C = op(A) op(B) is column-major C' = op(B)' op(A)': swap the operands.
-    let (tb_c, ta_c) = (if tb { b'T' } else { b'N' } as c_char, if ta { b'T' } else { b'N' } as c_char);
-    let (mm, nn, kk, la, lb, lc) = (as_int(n), as_int(m), as_int(k), as_int(ldb), as_int(lda), as_int(ldc));
-    let one = 1.0f32;
-    // With k = 0 BLAS does not read A or B, which may then be empty.
-    let (pa, pb) = if k == 0 { (c.as_ptr(), c.as_ptr()) } else { (b.as_ptr(), a.as_ptr()) };
-    // SAFETY: every pointer is valid for the extents checked above; sgemm_ reads A and B
-    // and writes only the m x n block of C.
-    unsafe { sgemm_(&tb_c, &ta_c, &mm, &nn, &kk, &one, pa, &la, pb, &lb, &beta, c.as_mut_ptr(), &lc) };
-}
 
 /// A growable f32 buffer whose start is 64-byte aligned.
 #[derive(Clone, Default)]
@@ -169,6 +83,9 @@ impl Layer {
 pub struct Dense {
     layers: Vec<Layer>,
     pub params: Buf,
+    /// Each layer's weight transposed (`in x out`, at the weight's offset), which the forward
+    /// pass reads in place; [`Dense::refresh`] rewrites it after the parameters change.
+    wt: Buf,
 }
 
 /// One thread's activations and gradient buffers, grown to the largest chunk it has seen.
@@ -193,7 +110,27 @@ impl Dense {
         }
         let mut buf = Buf::zeros(params.len());
         buf.copy_from_slice(&params);
-        Dense { layers, params: buf }
+        let mut dense = Dense { layers, params: buf, wt: Buf::zeros(params.len()) };
+        dense.refresh();
+        dense
+    }
+
+    /// Rewrites the transposed weights from the parameters: call after changing them.
+    pub fn refresh(&mut self) {
+        // In 16 x 16 blocks, whose rows stay in L1 on both sides.
+        const B: usize = 16;
+        for l in &self.layers {
+            let (w, wt) = (&self.params[l.w..l.b()], &mut self.wt[l.w..l.b()]);
+            for o0 in (0..l.out).step_by(B) {
+                for i0 in (0..l.inp).step_by(B) {
+                    for o in o0..(o0 + B).min(l.out) {
+                        for i in i0..(i0 + B).min(l.inp) {
+                            wt[i * l.out + o] = w[o * l.inp + i];
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Writes the parameters back into `mlp` (the network this was made from).
@@ -229,10 +166,23 @@ impl Dense {
             let input: &[f32] = if i == 0 { x } else { &done[i - 1] };
             let y = &mut rest[0];
             y.resize(rows * l.out);
-            gemm(false, true, rows, l.out, l.inp, input, l.inp, &self.params[l.w..l.b()], l.inp, 0.0, y, l.out);
+            gemm(false, false, rows, l.out, l.inp, input, l.inp, &self.wt[l.w..l.b()], l.out, 0.0, y, l.out);
             add_bias(y, &self.params[l.b()..l.b() + l.out], i < last);
         }
         &s.acts[last][..rows * self.output_dim()]
+    }
+
+    /// The outputs (`rows x out`) of `x` (`rows x in`), appended to `out`. Computed in chunks
+    /// of rows that stay in cache: a row's output depends on that row alone, so the chunks
+    /// change no bit.
+    pub fn predict(&self, x: &[f32], rows: usize, out: &mut Vec<f32>) {
+        const CHUNK: usize = 256;
+        let inp = self.layers[0].inp;
+        let mut s = Scratch::default();
+        for start in (0..rows).step_by(CHUNK) {
+            let n = CHUNK.min(rows - start);
+            out.extend_from_slice(self.forward(&x[start * inp..(start + n) * inp], n, &mut s));
+        }
     }
 
     /// Adds the gradient of a loss to `grads` (laid out as the parameters), given the input
@@ -271,8 +221,8 @@ impl Dense {
     }
 }
 
-/// The elementwise passes, each compiled twice, for AVX-512 (chosen at run time where the
-/// CPU has it) and for the baseline x86-64 the crate targets. Both give the same bits: the
+/// The elementwise passes, each compiled twice, for AVX-512 (where the active [`Kernel`] is
+/// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
 /// passes are independent per element or sum over rows in row order, and Rust neither
 /// reassociates nor fuses multiply-adds.
 macro_rules! vectorised {
@@ -287,8 +237,8 @@ macro_rules! vectorised {
                 unsafe fn wide($($arg: $ty),*) {
                     body($($arg),*)
                 }
-                if std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the CPU has AVX-512F.
+                if Kernel::active() == Kernel::Avx512 {
+                    // SAFETY: the variant is active only where the CPU has AVX-512F.
                     return unsafe { wide($($arg),*) };
                 }
             }
@@ -384,15 +334,13 @@ impl Adam {
 }
 
 /// What BC and T-REX share of a training run: the network, Adam, the lane threads and the
-/// summed gradient, with MKL sequential and denormals flushed on the calling thread while
-/// it lives.
+/// summed gradient, with denormals flushed on the calling thread while it lives.
 pub struct Trainer {
     pub net: Dense,
     adam: Adam,
     grads: Buf,
     pool: LanePool,
     l2: f32,
-    _blas: SequentialBlas,
     _ftz: FlushDenormals,
 }
 
@@ -400,10 +348,10 @@ impl Trainer {
     /// Trains `mlp`'s parameters with Adam at `lr` and `l2` x the sum of squared weights
     /// added to the loss, on up to `threads` threads.
     pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize) -> Self {
-        let (_blas, _ftz) = (SequentialBlas::new(), FlushDenormals::new());
+        let _ftz = FlushDenormals::new();
         let net = Dense::from_mlp(mlp);
         let (adam, grads) = (Adam::new(net.len(), lr), Buf::zeros(net.len()));
-        Trainer { net, adam, grads, pool: LanePool::new(threads), l2: l2 as f32, _blas, _ftz }
+        Trainer { net, adam, grads, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
     }
 
     /// Runs `f(lane, share, net)` for each of the [`LANES`] lanes, with the lane's share of
@@ -422,6 +370,7 @@ impl Trainer {
         lanes.for_each(|g| add_into(&mut self.grads, g));
         self.net.add_weight_l2(self.l2, &mut self.grads);
         self.adam.step(&mut self.net.params, &self.grads);
+        self.net.refresh();
     }
 
     /// Writes the parameters back into `mlp`; false (writing nothing) if any is not finite.
@@ -434,9 +383,9 @@ impl Trainer {
     }
 }
 
-/// The threads that compute lanes, kept for a whole training run: a thread started per step
-/// would pay MKL's per-thread set-up every step (T-REX on two cores: 113 model-iterations/s
-/// with a thread per step, 117-128 with the pool).
+/// The threads that compute lanes, kept for a whole training run rather than started per
+/// step (with MKL, T-REX on two cores ran 113 model-iterations/s with a thread per step and
+/// 117-128 with the pool).
 pub struct LanePool(Option<rayon::ThreadPool>);
 
 impl LanePool {
@@ -450,7 +399,6 @@ impl LanePool {
             .thread_name(|i| format!("idrex-lane-{i}"))
             .start_handler(|_| {
                 // For the thread's whole life, which is the pool's.
-                std::mem::forget(SequentialBlas::new());
                 std::mem::forget(FlushDenormals::new());
             })
             .build();
@@ -473,28 +421,6 @@ mod tests {
     use super::*;
     use crate::nn::Init;
     use tch::{Device, Kind, nn, nn::Module};
-
-    #[test]
-    fn gemm_matches_a_naive_product_in_every_transpose() {
-        let (m, n, k) = (5, 3, 4);
-        let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
-        let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.91).cos()).collect();
-        let at = |i: usize, j: usize| a[i * k + j];
-        let bt = |i: usize, j: usize| b[i * n + j];
-        let want: Vec<f32> = (0..m * n).map(|ij| (0..k).map(|p| at(ij / n, p) * bt(p, ij % n)).sum()).collect();
-        // The transposed operands, stored transposed.
-        let a_t: Vec<f32> = (0..k * m).map(|ij| at(ij % m, ij / m)).collect();
-        let b_t: Vec<f32> = (0..n * k).map(|ij| bt(ij % k, ij / k)).collect();
-        for (ta, tb) in [(false, false), (true, false), (false, true), (true, true)] {
-            let (aa, lda) = if ta { (&a_t, m) } else { (&a, k) };
-            let (bb, ldb) = if tb { (&b_t, k) } else { (&b, n) };
-            let mut c = vec![1.0; m * n];
-            gemm(ta, tb, m, n, k, aa, lda, bb, ldb, 1.0, &mut c, n);
-            for (got, w) in c.iter().zip(&want) {
-                assert!((got - (w + 1.0)).abs() < 1e-5, "ta {ta} tb {tb}: {got} vs {}", w + 1.0);
-            }
-        }
-    }
 
     /// The passes run their AVX-512 build on a CPU that has it: the bits must be those of
     /// the same operations one element at a time.
@@ -554,7 +480,6 @@ mod tests {
         let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
         let ts: Vec<f32> = Vec::try_from(target.flatten(0, -1)).unwrap();
         let mut s = Scratch::default();
-        let _blas = SequentialBlas::new();
         let out = dense.forward(&xs, rows, &mut s).to_vec();
         let want: Vec<f32> = Vec::try_from(mlp.forward(&x).flatten(0, -1)).unwrap();
         for (o, w) in out.iter().zip(&want) {
@@ -594,6 +519,7 @@ mod tests {
             let mut grads = vec![0.0; dense.len()];
             dense.backward(&xs, 6, &[1.0; 6], &mut s, &mut grads);
             adam.step(&mut dense.params, &grads);
+            dense.refresh();
         }
         let after = Dense::from_mlp(&mlp);
         for (a, b) in dense.params.iter().zip(after.params.iter()) {

@@ -49,46 +49,6 @@ impl Device {
     }
 }
 
-/// The instruction-set code path MKL (the BLAS and LAPACK inside libtorch, which BC, T-REX
-/// and PPO's initialisation go through) computes on here, e.g. `avx512-e1` or `avx2`. Its
-/// kernels sum in a different order on each, so a stage's bytes depend on it: the smoke
-/// pipeline gives other bytes for 27 of its 28 artifacts on MKL's AVX2 path than on this
-/// machine's AVX-512 one. Machines that share a store agree when each sets `MKL_CBWR`
-/// to the same branch (`MKL_CBWR=AVX2` reproduces the AVX2 bytes on an AVX-512 machine).
-/// Recorded in every manifest, so that `idrex verify --recompute` can tell a machine
-/// difference from a defect.
-pub fn cpu_code_path() -> String {
-    use std::os::raw::c_int;
-    #[link(name = "torch_cpu")]
-    unsafe extern "C" {
-        // MKL's `mkl_cbwr_get` and `mkl_cbwr_get_auto_branch`, exported by libtorch under
-        // their service names.
-        fn mkl_serv_cbwr_get(option: c_int) -> c_int;
-        fn mkl_serv_cbwr_get_auto_branch() -> c_int;
-    }
-    const BRANCH: c_int = 1;
-    // SAFETY: both read MKL's dispatch settings; neither takes a pointer.
-    let set = unsafe { mkl_serv_cbwr_get(BRANCH) };
-    // 1 (off) and 2 (auto): MKL picks the branch for this processor.
-    let branch = if set > 2 { set } else { unsafe { mkl_serv_cbwr_get_auto_branch() } };
-    let name = match branch {
-        3 => "compatible",
-        4 => "sse2",
-        6 => "ssse3",
-        7 => "sse4_1",
-        8 => "sse4_2",
-        9 => "avx",
-        10 => "avx2",
-        12 => "avx512",
-        14 => "avx512-e1",
-        15 => "avx512-e2",
-        16 => "avx512-e3",
-        17 => "avx512-e4",
-        n => return format!("mkl-branch-{n}"),
-    };
-    name.to_string()
-}
-
 /// What the user asks for: `auto` takes the GPU where libtorch sees one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -159,12 +119,6 @@ mod tests {
         if let Err(e) = cuda {
             assert!(e.to_string().contains("--device cpu"), "{e}");
         }
-    }
-
-    #[test]
-    fn names_mkls_code_path() {
-        let path = cpu_code_path();
-        assert!(path.starts_with("avx") || path.starts_with("sse") || path == "compatible", "{path}");
     }
 
     /// The CUDA backend loads wherever the linked libtorch has one: on a GPU machine only the

@@ -23,7 +23,8 @@ impl Activation {
 /// Weight initialisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Init {
-    /// libtorch's default (Kaiming-uniform weights, uniform bias), as in the D-REX code.
+    /// libtorch's default distribution (Kaiming-uniform weights, uniform bias), as in the
+    /// D-REX code.
     Default,
     /// Orthogonal weights with gain sqrt(2) on hidden layers and `out_gain` on the output
     /// layer, zero biases (the PPO implementation details of CleanRL and SB3).
@@ -60,27 +61,21 @@ pub struct Mlp {
 }
 
 impl Mlp {
-    /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]`, named `l0, l1, ...` under `p`.
+    /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]`, named `l0, l1, ...` under `p`, with
+    /// weights from this thread's initialisation generator ([`super::init`]; build inside
+    /// [`super::seeded`] for reproducible weights).
     pub fn new(p: &nn::Path, sizes: &[i64], activation: Activation, init: Init) -> Self {
         let n = sizes.len() - 1;
-        let layers = (0..n)
-            .map(|i| {
-                let cfg = match init {
-                    Init::Default => nn::LinearConfig::default(),
-                    Init::Orthogonal { out_gain } => nn::LinearConfig {
-                        ws_init: nn::Init::Orthogonal { gain: if i + 1 == n { out_gain } else { 2f64.sqrt() } },
-                        bs_init: Some(nn::Init::Const(0.0)),
-                        bias: true,
-                    },
-                    Init::Normal { std } => nn::LinearConfig {
-                        ws_init: nn::Init::Randn { mean: 0.0, stdev: std },
-                        bs_init: Some(nn::Init::Const(0.0)),
-                        bias: true,
-                    },
-                };
-                nn::linear(p / format!("l{i}"), sizes[i], sizes[i + 1], cfg)
-            })
-            .collect();
+        let zeros = nn::LinearConfig { ws_init: nn::Init::Const(0.0), bs_init: Some(nn::Init::Const(0.0)), bias: true };
+        let layers: Vec<nn::Linear> = (0..n).map(|i| nn::linear(p / format!("l{i}"), sizes[i], sizes[i + 1], zeros)).collect();
+        tch::no_grad(|| {
+            for (i, l) in layers.iter().enumerate() {
+                let (out, inp) = (sizes[i + 1], sizes[i]);
+                let (w, b) = super::init::layer(init, out as usize, inp as usize, i + 1 == n);
+                l.ws.shallow_clone().copy_(&Tensor::from_slice(&w).view([out, inp]));
+                l.bs.as_ref().expect("idrex's linear layers have biases").shallow_clone().copy_(&Tensor::from_slice(&b));
+            }
+        });
         Mlp { layers, activation }
     }
 

@@ -4,6 +4,8 @@
 pub mod cpu;
 pub mod dense;
 pub mod device;
+pub mod gemm;
+pub mod init;
 pub mod mlp;
 pub mod policy;
 pub mod reward;
@@ -11,40 +13,19 @@ pub mod sidecar;
 
 pub use cpu::MlpCpu;
 pub use device::{Device, DeviceChoice};
+pub use init::{building, seeded};
 pub use mlp::{Activation, Init, Mlp, WeightInit};
 pub use policy::{ActorCritic, PolicyConfig};
 pub use reward::{RewardConfig, RewardEnsemble, RewardNet};
-
-/// Runs `f` (which builds networks) with libtorch's global generator seeded to `seed`,
-/// holding a process-wide lock: stages run in parallel threads, and without the lock their
-/// initialisations would interleave on the one global generator and stop being
-/// reproducible. Everything random after initialisation uses our own seeded generators.
-pub fn seeded<T>(seed: u64, f: impl FnOnce() -> T) -> T {
-    let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
-    tch::manual_seed(seed as i64);
-    f()
-}
-
-static INIT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// Runs `f`, which builds networks whose initial weights are then overwritten (loading a
-/// saved model), under the same lock as [`seeded`]: building draws from libtorch's global
-/// generator, and doing so while another stage initialises would change that stage's
-/// weights. (It did: PPO runs started while a reward was being loaded got different
-/// critics, in 7 of 12 smoke runs against an S3 store, whose timing made the overlap common.)
-pub fn building<T>(f: impl FnOnce() -> T) -> T {
-    let _guard = INIT.lock().unwrap_or_else(|e| e.into_inner());
-    f()
-}
 
 /// Whether every variable of `vs` is finite: nothing non-finite is ever published.
 pub fn all_finite(vs: &tch::nn::VarStore) -> bool {
     tch::no_grad(|| vs.trainable_variables().iter().all(|t| bool::try_from(&t.isfinite().all()).unwrap_or(false)))
 }
 
-/// Makes libtorch's operators single-threaded (a process-wide setting). Their results can
-/// depend on the number of threads (reduction order), and stage outputs must depend only on
-/// the stage's definition; stages parallelise over stages, ensemble members and
+/// Makes libtorch's operators single-threaded (a process-wide setting): on the CPU they
+/// compute nothing that is stored (idrex's own kernels do), and idle libtorch threads would
+/// spin against the stages' own; stages parallelise over stages, ensemble members and
 /// environments instead.
 pub fn single_threaded() {
     tch::set_num_threads(1);

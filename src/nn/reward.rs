@@ -10,6 +10,7 @@ use std::path::Path;
 
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
+use super::dense::Dense;
 use super::sidecar::{load_weights, read_json, save_weights, write_json};
 use super::{Activation, Mlp, WeightInit};
 use crate::data::normalize::RunningMeanStd;
@@ -138,14 +139,30 @@ impl RewardEnsemble {
         self.nets[m].forward(x).squeeze_dim(-1)
     }
 
-    /// Raw per-model rewards of a batch of steps, `[model][row]`, without gradients.
+    /// Raw per-model rewards of a batch of steps, `[model][row]`, without gradients. On the
+    /// CPU through [`Dense`] (the same bits on every processor), on a GPU through libtorch.
     pub fn raw(&self, obs: &[f32], actions: &[f32]) -> Vec<Vec<f32>> {
-        tch::no_grad(|| {
-            let x = self.inputs(obs, actions);
-            (0..self.nets.len())
-                .map(|m| Vec::try_from(self.forward(m, &x).to_device(Device::Cpu).to_kind(Kind::Float)).expect("f32 rewards"))
-                .collect()
-        })
+        if self.tch_device() != Device::Cpu {
+            return tch::no_grad(|| {
+                let x = self.inputs(obs, actions);
+                (0..self.nets.len())
+                    .map(|m| Vec::try_from(self.forward(m, &x).to_device(Device::Cpu).to_kind(Kind::Float)).expect("f32 rewards"))
+                    .collect()
+            });
+        }
+        let (od, n) = (self.config.obs_dim, obs.len() / self.config.obs_dim);
+        let x: std::borrow::Cow<[f32]> = match self.config.act_dim {
+            None => obs.into(),
+            Some(a) => (0..n).flat_map(|i| obs[i * od..(i + 1) * od].iter().chain(&actions[i * a..(i + 1) * a]).copied()).collect(),
+        };
+        self.nets
+            .iter()
+            .map(|net| {
+                let mut out = Vec::with_capacity(n);
+                Dense::from_mlp(net).predict(&x, n, &mut out);
+                out
+            })
+            .collect()
     }
 
     /// Predicted return of one trajectory: the ensemble mean of each model's summed raw reward.

@@ -15,9 +15,6 @@ pub struct Recomputed {
     pub node: String,
     /// Output paths whose bytes differ, or that exist on one side only.
     pub differing: Vec<String>,
-    /// MKL's code path where it was computed, where that is known and not this machine's:
-    /// then a difference comes from the machines, not from idrex.
-    pub computed_on: Option<String>,
 }
 
 fn diff(stored: &[OutputFile], fresh: &[OutputFile]) -> Vec<String> {
@@ -44,7 +41,5 @@ pub fn recompute(store: &Store, key: &str, threads: usize) -> Result<Recomputed>
     let ctx = StageCtx { seed: m.seed, inputs, out: &scratch.dir, threads, progress: &bar };
     let result = stage::run(&params, &ctx).and_then(|_| hash_outputs(&scratch.dir));
     let _ = std::fs::remove_dir_all(&scratch.dir);
-    let here = crate::nn::device::cpu_code_path();
-    let computed_on = m.cpu_code_path.filter(|there| *there != here);
-    Ok(Recomputed { key: key.to_string(), node: m.node, differing: diff(&m.outputs, &result?), computed_on })
+    Ok(Recomputed { key: key.to_string(), node: m.node, differing: diff(&m.outputs, &result?) })
 }

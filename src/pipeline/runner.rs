@@ -134,7 +134,7 @@ fn run_node(
             ended_unix: now_unix(),
             wall_s,
             idrex_version: env!("CARGO_PKG_VERSION").to_string(),
-            cpu_code_path: Some(crate::nn::device::cpu_code_path()),
+            kernel: Some(crate::nn::gemm::Kernel::active().name().to_string()),
         };
         store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })

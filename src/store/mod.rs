@@ -61,10 +61,11 @@ pub struct Manifest {
     pub ended_unix: f64,
     pub wall_s: f64,
     pub idrex_version: String,
-    /// MKL's instruction-set code path where it was computed ([`crate::nn::device::cpu_code_path`]);
-    /// absent from manifests written before it was recorded.
+    /// The kernel variant the CPU computed with ([`crate::nn::gemm::Kernel`]), as information
+    /// only: every variant gives the same bytes. Absent from manifests written before it was
+    /// recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cpu_code_path: Option<String>,
+    pub kernel: Option<String>,
 }
 
 /// The key of a stage instance.
@@ -754,7 +755,7 @@ mod tests {
             ended_unix: 0.0,
             wall_s: 0.0,
             idrex_version: "test".into(),
-            cpu_code_path: None,
+            kernel: None,
         }
     }
 

@@ -159,8 +159,12 @@ impl StageKind {
     pub fn version(self) -> u32 {
         match self {
             // 2: trained on nn::dense (explicit gradients over MKL's sgemm) instead of
-            // libtorch's autograd, which sums in another order.
-            StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts => 2,
+            // libtorch's autograd, which sums in another order. 3: idrex's own products
+            // (nn::gemm) and initial weights (nn::init), the same bits on every processor.
+            StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts => 3,
+            // 2: the networks' initial weights (PPO) and the learned reward's inference
+            // (PPO, evaluation) from idrex's own code instead of libtorch's.
+            StageKind::Demonstrator | StageKind::Ppo | StageKind::Eval => 2,
             _ => 1,
         }
     }
