@@ -324,6 +324,33 @@ fn gemm_gflops(threads: usize, device: Device) -> f64 {
     2.0 * (n as f64).powi(3) / best / 1e9
 }
 
+/// One thread's matrix-product rate at T-REX's hidden layer (a chunk of 200 rows through
+/// 256 x 256), in GFLOP/s, best of 5: idrex's kernel (`nn::gemm`, the active variant) and
+/// libtorch's (MKL's) on the same operands.
+fn hidden_layer_gflops() -> (f64, f64) {
+    let (m, n, k) = (200usize, 256usize, 256usize);
+    let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
+    let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.91).cos()).collect();
+    let mut c = vec![0.0f32; m * n];
+    let reps = 200;
+    let flop = 2.0 * (m * n * k * reps) as f64;
+    let best = |f: &mut dyn FnMut()| {
+        f();
+        (0..5)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let ours = best(&mut || (0..reps).for_each(|_| crate::nn::gemm::gemm(false, false, m, n, k, &a, k, &b, n, 0.0, &mut c, n)));
+    crate::nn::single_threaded();
+    let (ta, tb) = (tch::Tensor::from_slice(&a).view([m as i64, k as i64]), tch::Tensor::from_slice(&b).view([k as i64, n as i64]));
+    let torch = best(&mut || (0..reps).for_each(|_| _ = ta.matmul(&tb)));
+    (flop / ours / 1e9, flop / torch / 1e9)
+}
+
 /// The seconds that n more iterations take: time(f(2n)) - time(f(n)), which leaves out the
 /// fixed costs (pair sampling, the final accuracy pass) the Python loop does not have.
 fn marginal(n: usize, mut f: impl FnMut(usize) -> anyhow::Result<()>) -> anyhow::Result<f64> {
@@ -361,6 +388,7 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     let device = args.device.resolve();
     device.ensure_available()?;
     let peak = gemm_gflops(threads, device);
+    let (kernel_gflops, libtorch_gflops) = hidden_layer_gflops();
     let (trex_rate, bc_rate) = learner_rates(args, threads, device)?;
     // On the GPU, the CPU learners are the figure to beat.
     let cpu = if device.is_cpu() { None } else { Some(learner_rates(args, threads, Device::Cpu)?) };
@@ -387,6 +415,11 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         "device": device.name(),
         "threads": threads,
         "gemm_gflops": peak,
+        "kernel": crate::nn::gemm::Kernel::active().name(),
+        "hidden_layer_one_thread": {
+            "idrex_gflops": kernel_gflops, "libtorch_gflops": libtorch_gflops, "ratio": kernel_gflops / libtorch_gflops,
+            "fraction_of_gemm_peak_per_thread": kernel_gflops / (peak / threads as f64),
+        },
         "trex": {
             "idrex_model_iterations_per_s": trex_rate, "pytorch_model_iterations_per_s": pt_trex,
             "ratio": pt_trex.map(|p| trex_rate / p), "gflop_per_model_iteration": TREX_FLOP / 1e9,

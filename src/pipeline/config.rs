@@ -208,6 +208,14 @@ pub struct PipelineFile {
     /// One RL run per seed (R = len).
     #[serde(default = "default_seeds")]
     pub seeds: Vec<u64>,
+    /// Independent replicates of the whole pipeline, each with its own seeds for every stage
+    /// ([`replicate_seed`]); a whole number from 1 to [`MAX_REPLICATES`] (default 1).
+    #[serde(default)]
+    pub replicates: Option<f64>,
+    /// The index of this file's first replicate (default 0): files that share a `name` and
+    /// split one study give disjoint ranges.
+    #[serde(default)]
+    pub first_replicate: Option<f64>,
     #[serde(default = "default_methods")]
     pub methods: Vec<Method>,
     /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting).
@@ -283,6 +291,20 @@ impl SlurmConfig {
     }
 }
 
+/// The most replicates one file may ask for.
+pub const MAX_REPLICATES: usize = 1000;
+
+/// Seeds of replicate `r` are the file's seeds plus `r` times this: far beyond every offset
+/// [`crate::seed::derive`] adds to a stage seed, so no replicate's streams meet another's.
+pub const REPLICATE_STRIDE: u64 = 1_000_000_007;
+
+/// The seed a stage of replicate `r` uses in place of the file's `seed`. Replicate 0 keeps
+/// the file's seeds, so a file without replicates is its own replicate 0, and raising the
+/// count reuses every stored replicate.
+pub fn replicate_seed(seed: u64, r: usize) -> u64 {
+    seed.wrapping_add(REPLICATE_STRIDE.wrapping_mul(r as u64))
+}
+
 fn default_seeds() -> Vec<u64> {
     vec![0, 1, 2]
 }
@@ -327,6 +349,10 @@ pub struct Pipeline {
     pub spec: PipelineFile,
     /// The reward PPO optimises on a learned ensemble.
     pub composition: Composition,
+    /// The replicates this file expands to (`first_replicate..first_replicate + replicates`).
+    pub replicates: std::ops::Range<usize>,
+    /// The replicate this pipeline is ([`Pipeline::replicate`]; 0 for the file itself).
+    pub replicate: usize,
     /// The file's `device`, resolved on this machine ([`Pipeline::on`] overrides it).
     pub device: Device,
 }
@@ -424,6 +450,18 @@ impl Pipeline {
                 "methods is empty; list at least one of bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc".into(),
             );
         }
+        let mut count = |v: Option<f64>, key: &str, least: f64| -> usize {
+            match v {
+                None => least as usize,
+                Some(x) if x.fract() == 0.0 && x >= least && x <= MAX_REPLICATES as f64 => x as usize,
+                Some(x) => {
+                    bad(&[key], format!("{key} is {x}; give a whole number from {least} to {MAX_REPLICATES}"));
+                    least as usize
+                }
+            }
+        };
+        let replicates = count(spec.replicates, "replicates", 1.0);
+        let first_replicate = count(spec.first_replicate, "first_replicate", 0.0);
         let mut positive = |v: usize, keys: &[&str], what: &str| {
             if v == 0 {
                 bad(keys, format!("{what} must be at least 1"));
@@ -526,7 +564,8 @@ impl Pipeline {
         let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
         let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
         let device = spec.device.resolve();
-        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, device })
+        let replicates = first_replicate..first_replicate + replicates;
+        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, replicates, replicate: 0, device })
     }
 
     /// This pipeline computing on the device `choice` resolves to (the command line's
@@ -545,6 +584,20 @@ impl Pipeline {
     /// the environment's).
     pub fn is_study(&self) -> bool {
         self.envs.len() > 1
+    }
+
+    /// Whether the file expands to more than one replicate, or to one other than replicate 0
+    /// (node names then start with the replicate's, `r3/`).
+    pub fn is_replicated(&self) -> bool {
+        self.replicates != (0..1)
+    }
+
+    /// Replicate `r` of this pipeline: every stage's seed moved by [`replicate_seed`].
+    pub fn replicate(&self, r: usize) -> Pipeline {
+        let mut p = self.clone();
+        p.spec.seeds = self.spec.seeds.iter().map(|&s| replicate_seed(s, r)).collect();
+        p.replicate = r;
+        p
     }
 
     /// The pipeline file's directory, against which relative paths resolve.
@@ -638,6 +691,13 @@ mod tests {
         assert_eq!(err("version: 1\nenv: Hopper-v5\nbc:\n  iteratons: 5\n").split(": unknown field").next().unwrap(), "p.yaml:4:3: bc");
         assert!(err("version: 1\nenv: Hopper-v5\nbc:\n  iteratons: 5\n").contains("remove it or fix its spelling"));
         assert!(err("version: 1\nenv: Hopper-v5\nseeds: zero\n").contains("p.yaml:3:8: seeds: invalid type"));
+        for (bad, why) in
+            [("0", "replicates is 0"), ("-2", "replicates is -2"), ("2.5", "replicates is 2.5"), ("1001", "replicates is 1001")]
+        {
+            let e = err(&format!("version: 1\nenv: Hopper-v5\nreplicates: {bad}\n"));
+            assert!(e.starts_with("p.yaml:3:1: ") && e.contains(why) && e.contains("whole number from 1 to 1000"), "{e}");
+        }
+        assert!(err("version: 1\nenv: Hopper-v5\nfirst_replicate: -1\n").contains("first_replicate is -1"));
         assert_eq!(
             err("version: 1\nenv: Hopper-v9\n"),
             "p.yaml:2:1: unknown environment 'Hopper-v9'; known environments: HalfCheetah-v5, Hopper-v5, Walker2d-v5; write e.g. `env: Hopper-v5`"

@@ -97,7 +97,15 @@ pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, c
 }
 
 fn eval_params(p: &Pipeline, method: Method, iteration: usize, run: usize) -> Params {
-    Params::Eval(eval::EvalParams { env: p.env, episodes: p.spec.eval.episodes, pipeline: p.name.clone(), method, iteration, run })
+    Params::Eval(eval::EvalParams {
+        env: p.env,
+        episodes: p.spec.eval.episodes,
+        pipeline: p.name.clone(),
+        method,
+        iteration,
+        run,
+        replicate: p.replicate,
+    })
 }
 
 /// One RL run per seed of `m` on `reward`, each with its evaluation; returns the PPO nodes.
@@ -126,18 +134,28 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
 
 /// Expands a validated pipeline into its DAG. A study (several environments) is the union
 /// of each environment's graph, its node names prefixed with the environment's name
-/// (`Hopper-v5/drex/ppo/0`).
+/// (`Hopper-v5/drex/ppo/0`); a replicated file, the union of its replicates' graphs, named
+/// `r<i>/` within each environment (`Hopper-v5/r3/drex/ppo/0`).
 pub fn expand(p: &Pipeline) -> crate::Result<Graph> {
-    if !p.is_study() {
+    if !p.is_study() && !p.is_replicated() {
         return expand_one(p);
     }
     let mut g = Graph::default();
     for &env in &p.envs {
-        let sub = expand_one(&p.for_env(env))?;
-        let prefix = |n: &str| format!("{}/{n}", env.name());
-        for n in sub.nodes {
-            let inputs = n.inputs.iter().map(|(role, src)| (role.clone(), prefix(src))).collect();
-            g.push(prefix(&n.name), n.params, n.seed, inputs);
+        for r in p.replicates.clone() {
+            let sub = expand_one(&p.for_env(env).replicate(r))?;
+            let mut prefix = String::new();
+            if p.is_study() {
+                prefix.push_str(&format!("{}/", env.name()));
+            }
+            if p.is_replicated() {
+                prefix.push_str(&format!("r{r}/"));
+            }
+            let named = |n: &str| format!("{prefix}{n}");
+            for n in sub.nodes {
+                let inputs = n.inputs.iter().map(|(role, src)| (role.clone(), named(src))).collect();
+                g.push(named(&n.name), n.params, n.seed, inputs);
+            }
         }
     }
     Ok(g)
@@ -290,6 +308,41 @@ mod tests {
         let p = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
         let (a, b) = (expand(&p(BASE)).unwrap().keys(), expand(&p(&format!("{BASE}{extra}"))).unwrap().keys());
         a.keys().filter(|n| a[*n] != b[*n]).cloned().collect()
+    }
+
+    /// Replicate r has the same keys whatever the count, replicate 0 those of the file
+    /// without replicates; every replicate has its own seeds for every stage; a study takes
+    /// replicates per environment; two files of one study split its replicates.
+    #[test]
+    fn replicates_keep_their_keys_as_the_count_grows() {
+        let parse = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
+        let single = expand(&parse(BASE)).unwrap().keys();
+        let two = expand(&parse(&format!("{BASE}replicates: 2\n"))).unwrap();
+        let three = expand(&parse(&format!("{BASE}replicates: 3\n"))).unwrap().keys();
+        assert_eq!(two.nodes.len(), 2 * single.len());
+        for (name, key) in two.keys() {
+            assert_eq!(three[&name], key, "{name}");
+        }
+        for (name, key) in &single {
+            assert_eq!(&three[&format!("r0/{name}")], key, "{name}");
+            assert_ne!(&three[&format!("r1/{name}")], key, "replicate 1 recomputes {name}");
+        }
+        for n in two.nodes.iter().filter(|n| n.name.starts_with("r1/")) {
+            let twin = two.get(&n.name.replacen("r1/", "r0/", 1)).unwrap();
+            assert_eq!(n.seed, crate::pipeline::config::replicate_seed(twin.seed, 1), "{}", n.name);
+            if let (Params::Eval(a), Params::Eval(b)) = (&n.params, &twin.params) {
+                assert_eq!((a.replicate, b.replicate), (1, 0));
+            }
+        }
+        // The second half of a study in another file with the same name: the same nodes.
+        let split = expand(&parse(&format!("{BASE}replicates: 2\nfirst_replicate: 1\n"))).unwrap().keys();
+        assert_eq!(split.len(), 2 * single.len());
+        for (name, key) in &split {
+            assert_eq!(&three[name], key, "{name}");
+        }
+        let study = expand(&parse(&format!("{}replicates: 2\n", BASE.replace("env: Hopper-v5", "env: [Hopper-v5, Walker2d-v5]")))).unwrap();
+        assert_eq!(study.keys()["Hopper-v5/r1/drex/trex"], three["r1/drex/trex"]);
+        assert!(study.get("Walker2d-v5/r1/drex/ppo/1").is_some());
     }
 
     #[test]

@@ -25,6 +25,14 @@ pub struct EvalParams {
     pub method: Method,
     pub iteration: usize,
     pub run: usize,
+    /// The study replicate (independent seeds for every stage) the run belongs to; absent
+    /// for replicate 0, whose keys are those of a file without replicates.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub replicate: usize,
+}
+
+fn is_zero(r: &usize) -> bool {
+    *r == 0
 }
 
 /// How the learned reward scores the final policy's evaluation episodes.
