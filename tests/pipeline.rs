@@ -542,3 +542,79 @@ fn runs_in_two_pid_namespaces_share_a_store() {
     assert_eq!(computed(&a) + computed(&b), artifact_dirs(&store).len(), "{}\n{}", stdout(&a), stdout(&b));
     assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
 }
+
+/// Two files of one study (the same `name`, disjoint replicates) report as one: the
+/// aggregate table over three replicates, read back with Python's csv module; a file of the
+/// same study that imports other demonstrations, or that gives a stored replicate other
+/// seeds, is refused with one line naming the study and the fix.
+#[test]
+fn a_study_split_over_two_files_reports_its_replicates() {
+    let dir = TempDir::new("study");
+    let store = dir.join("store");
+    let smoke = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
+    let file = |name: &str, extra: &str, seeds: &str| {
+        let path = dir.join(name);
+        let text = smoke.replace("seeds: [0, 1]", &format!("name: study\nseeds: {seeds}\n{extra}"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let run = |path: &Path| {
+        let rec = dir.join("r.rrd");
+        idrex(&["pipeline", "run", path.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()])
+    };
+    for f in [file("a.yaml", "replicates: 2", "[0, 1]"), file("b.yaml", "first_replicate: 2", "[0, 1]")] {
+        let out = run(&f);
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let report = dir.join("report");
+    let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", report.to_str().unwrap()]);
+    assert!(rep.status.success(), "{}", stderr(&rep));
+    assert!(stdout(&rep).contains("### Hopper-v5, study `study`: final policy"), "{}", stdout(&rep));
+    let check = r#"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+drex = [r for r in rows if r["method"] == "drex" and r["protocol"] == "final"]
+assert len(drex) == 1 and drex[0]["replicates"] == "3" and drex[0]["runs"] == "6", drex
+r = drex[0]
+assert float(r["mean_ci_low"]) <= float(r["mean"]) <= float(r["mean_ci_high"]), r
+assert 0 <= float(r["above_demos_avg"]) <= 1
+imp = list(csv.DictReader(open(sys.argv[2])))
+assert {(i["method"], i["baseline"]) for i in imp if i["protocol"] == "final"} >= {("drex", "bc"), ("idrex-multi-bc", "drex")}, imp
+assert all(0 <= float(i["probability"]) <= 1 and i["replicates"] == "3" for i in imp), imp
+print("ok")
+"#;
+    let (agg, imp) = (report.join("aggregate.csv"), report.join("improvement.csv"));
+    assert_eq!(py(check, &[agg.to_str().unwrap(), imp.to_str().unwrap()]).trim(), "ok");
+    assert!(report.join("figures/hopper-v5-study-study-intervals.png").exists());
+    assert!(report.join("figures/hopper-v5-study-study-profile.png").exists());
+
+    // Replicate 1 again, with other seeds: two artifacts claim its runs.
+    let out = run(&file("c.yaml", "first_replicate: 1", "[5, 6]"));
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", report.to_str().unwrap()]);
+    assert!(
+        !rep.status.success() && stderr(&rep).contains("is evaluated twice") && stderr(&rep).contains("first_replicate"),
+        "{}",
+        stderr(&rep)
+    );
+    let fresh = dir.join("store2");
+    std::fs::create_dir_all(&fresh).unwrap();
+    // Replicate 3 of the study from the original demonstrations, beside generated ones.
+    let npz = repo("../shared/data/drex-demos/hopper.npz");
+    if npz.exists() {
+        let imported = file("e.yaml", "first_replicate: 3", "[0, 1]");
+        let text = std::fs::read_to_string(&imported).unwrap();
+        assert!(text.contains("demos:\n  episodes: 2\n"));
+        std::fs::write(&imported, text.replace("demos:\n  episodes: 2\n", &format!("demos:\n  from: {}\n", npz.display()))).unwrap();
+        for f in [file("d.yaml", "replicates: 2", "[0, 1]"), imported] {
+            let rec = dir.join("r.rrd");
+            let out =
+                idrex(&["pipeline", "run", f.to_str().unwrap(), "--store", fresh.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
+            assert!(out.status.success(), "{}", stderr(&out));
+        }
+        let rep = idrex(&["report", "--store", fresh.to_str().unwrap(), "--out", report.to_str().unwrap()]);
+        assert!(!rep.status.success() && stderr(&rep).contains("disagree on the demonstrations"), "{}", stderr(&rep));
+    } else {
+        eprintln!("the disagreeing-demonstrations case skipped: {} is not here", npz.display());
+    }
+}

@@ -36,8 +36,12 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         crate::report::write_csv(&mut t.demos, &args.out.join("demos.csv"))?;
         crate::report::write_csv(&mut t.accuracy, &args.out.join("reward_accuracy.csv"))?;
         crate::report::write_csv(&mut crate::report::protocols_frame(&t.protocols)?, &args.out.join("protocols.csv"))?;
+        if !t.aggregate.is_empty() {
+            crate::report::write_csv(&mut crate::report::studies::aggregate_frame(&t.aggregate)?, &args.out.join("aggregate.csv"))?;
+            crate::report::write_csv(&mut crate::report::studies::improvement_frame(&t.improvement)?, &args.out.join("improvement.csv"))?;
+        }
     }
-    let figures = crate::report::figures::write(&store, &t.protocols, &args.out.join("figures"))?;
+    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &args.out.join("figures"))?;
     let notes = crate::report::notes(&store)?;
     let md = format!("{}{notes}{}", crate::report::markdown(&t), crate::report::figures::markdown(&figures, "figures"));
     if args.format != ReportFormat::Csv {

@@ -8,14 +8,19 @@
 //! - `ppo`: true and learned (ensemble mean) return of every checkpoint against PPO's steps,
 //!   one line per run, coloured by method;
 //! - `final`: the five methods under the three protocols, bars with 95 % bootstrap intervals,
-//!   with the demonstrations' average.
+//!   with the demonstrations' average;
+//! - per (environment, study) with several replicates, `intervals` and `profile`
+//!   ([`studies`]).
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+mod studies;
+
 use super::Artifacts;
+use super::studies::AggregateRow;
 use super::{Protocol, ProtocolRow};
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
@@ -415,14 +420,14 @@ fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
 }
 
 /// Writes every figure into `dir`; returns what it wrote, for the markdown to link.
-pub fn write(store: &Artifacts, protocols: &[ProtocolRow], dir: &Path) -> Result<Vec<Written>> {
+pub fn write(store: &Artifacts, protocols: &[ProtocolRow], aggregate: &[AggregateRow], dir: &Path) -> Result<Vec<Written>> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
     for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
         let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(&m) else { continue };
-        let g = groups.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
+        let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         if g.demos.is_none()
             && let Some((_, Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. })) =
                 m.inputs.get("demos").and_then(|k| typed(store, k))
@@ -459,6 +464,7 @@ pub fn write(store: &Artifacts, protocols: &[ProtocolRow], dir: &Path) -> Result
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
+    let groups_demos: BTreeMap<(String, String), f64> = groups.iter().filter_map(|(k, g)| g.demos.map(|d| (k.clone(), d.0))).collect();
     for ((env, pipeline), mut g) in groups {
         let slug = format!("{}-{}", env.to_lowercase(), pipeline).replace(['/', ' '], "_");
         let mut emit = |fig: &dyn Fn(&Path, &str) -> Result<String>, name: &str| -> Result<()> {
@@ -497,6 +503,24 @@ pub fn write(store: &Artifacts, protocols: &[ProtocolRow], dir: &Path) -> Result
             let fig = FinalBars { env: env.clone(), pipeline: pipeline.clone(), rows, demos: g.demos.map(|d| d.0) };
             emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "final")?;
         }
+    }
+    let mut studies: Vec<(&str, &str)> = aggregate.iter().map(|a| (a.env.as_str(), a.study.as_str())).collect();
+    studies.dedup();
+    for (env, study) in studies {
+        let slug = format!("{}-study-{}", env.to_lowercase(), study).replace(['/', ' '], "_");
+        // The demonstrations of the study's first table (every table of a study has the same).
+        let demos = protocols
+            .iter()
+            .find(|r| r.env == env && r.study == study)
+            .and_then(|r| groups_demos.get(&(env.to_string(), r.pipeline.clone())).copied());
+        let label = format!("study {study}");
+        let rows: Vec<AggregateRow> = aggregate.iter().filter(|a| a.env == env && a.study == study).cloned().collect();
+        let fig = studies::Intervals { env: env.into(), study: study.into(), rows, demos };
+        save(&fig, dir, &format!("{slug}-intervals"))?;
+        written.push(Written { env: env.into(), pipeline: label.clone(), stem: format!("{slug}-intervals"), title: fig.title() });
+        let fig = studies::Profile::of(env, study, protocols, demos);
+        save(&fig, dir, &format!("{slug}-profile"))?;
+        written.push(Written { env: env.into(), pipeline: label, stem: format!("{slug}-profile"), title: fig.title() });
     }
     Ok(written)
 }

@@ -8,6 +8,7 @@
 use std::collections::BTreeMap;
 
 pub mod figures;
+pub mod studies;
 
 use polars::prelude::*;
 
@@ -66,7 +67,13 @@ struct RunEval {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProtocolRow {
     pub env: String,
+    /// The table: the pipeline's name, with the replicate past the first (`study/r3`).
     pub pipeline: String,
+    /// The pipeline's name (a study's, across the files and replicates that share it).
+    pub study: String,
+    pub replicate: usize,
+    /// Each run's mean return at the chosen policy, in run order.
+    pub run_means: Vec<f64>,
     pub method: String,
     pub protocol: Protocol,
     /// The chosen checkpoint's global step (None for the final policy or without checkpoints).
@@ -114,19 +121,22 @@ fn argmax(steps: &[usize], score: impl Fn(usize) -> Option<f64>) -> Option<usize
 }
 
 /// The three protocols' rows of one (env, pipeline, method).
-fn protocol_rows(env: &str, pipeline: &str, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
+fn protocol_rows(env: &str, table: &Table, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
     let row = |protocol, step: Option<usize>, per_run: Vec<Vec<f64>>| {
         let pooled: Vec<f64> = per_run.iter().flatten().copied().collect();
         let run_means: Vec<f64> = per_run.iter().map(|r| ReturnStats::of(r).mean).collect();
         ProtocolRow {
             env: env.into(),
-            pipeline: pipeline.into(),
+            pipeline: table.label.clone(),
+            study: table.study.clone(),
+            replicate: table.replicate,
             method: method.into(),
             protocol,
             step,
             stats: ReturnStats::of(&pooled),
             runs: runs.len(),
             ci: bootstrap_ci(&run_means, RESAMPLES, 0),
+            run_means,
             gap_to_best: None,
         }
     };
@@ -160,14 +170,24 @@ fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
 }
 
+/// A table of the report: one pipeline's runs, or one replicate's of a study.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+struct Table {
+    label: String,
+    study: String,
+    replicate: usize,
+}
+
 /// One evaluation episode per row, one demonstration episode per row, and one reward-
 /// accuracy row per evaluation run.
 struct Long {
     episodes: DataFrame,
     demos: DataFrame,
     accuracy: DataFrame,
-    /// (env, pipeline, method label) -> its evaluated runs.
-    runs: BTreeMap<(String, String, String), Vec<RunEval>>,
+    /// (env, table, method label) -> its evaluated runs.
+    runs: BTreeMap<(String, Table, String), Vec<RunEval>>,
+    /// (env, table label) -> the demonstrations' returns.
+    demo_returns: BTreeMap<(String, String), Vec<f64>>,
 }
 
 /// How well the learned reward ranks one PPO run's own policies over training: Spearman
@@ -212,7 +232,11 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
     let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
-    let mut runs: BTreeMap<(String, String, String), Vec<RunEval>> = BTreeMap::new();
+    let mut runs: BTreeMap<(String, Table, String), Vec<RunEval>> = BTreeMap::new();
+    let mut demo_returns: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
+    let mut seen: BTreeMap<(String, Table, String, usize), String> = BTreeMap::new();
+    // (env, study) -> where each of its tables' demonstrations came from.
+    let mut demo_sources: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
     for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
@@ -227,21 +251,34 @@ fn collect(store: &Artifacts) -> Result<Long> {
         };
         let e = p.env.name().to_string();
         let label = if p.iteration > 2 { format!("{} (k={})", p.method.name(), p.iteration) } else { p.method.name().to_string() };
+        let table = Table { label: p.table(), study: p.pipeline.clone(), replicate: p.replicate };
         for &r in &x.summary.returns {
             env.push(e.clone());
             method.push(label.clone());
-            pipeline.push(p.pipeline.clone());
+            pipeline.push(table.label.clone());
             run.push(p.run as u32);
             ret.push(r);
         }
-        runs.entry((e.clone(), p.pipeline.clone(), label.clone())).or_default().push(RunEval {
+        if let Some(other) = seen.insert((e.clone(), table.clone(), label.clone(), p.run), m.key.clone()) {
+            return Err(Error::Invalid(format!(
+                "{e}: run {} of {label} in table {} is evaluated twice (artifacts {} and {}): two pipeline files named `{}` \
+                 with other settings, or an older idrex's results in the same store; give one file another `name`, give \
+                 the files disjoint `first_replicate` ranges, or `idrex gc` the store",
+                p.run,
+                table.label,
+                &other[..12],
+                &m.key[..12],
+                p.pipeline
+            )));
+        }
+        runs.entry((e.clone(), table.clone(), label.clone())).or_default().push(RunEval {
             run: p.run,
             final_returns: x.summary.returns.clone(),
             checkpoints: x.checkpoints.clone(),
         });
         if let Some(acc) = &x.reward {
             a_env.push(e.clone());
-            a_pipeline.push(p.pipeline.clone());
+            a_pipeline.push(table.label.clone());
             a_method.push(label.clone());
             a_spearman.push(acc.spearman);
             a_pearson.push(acc.pearson);
@@ -250,19 +287,34 @@ fn collect(store: &Artifacts) -> Result<Long> {
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
         if let Some(dk) = m.inputs.get("demos")
-            && demo_keys.insert((e.clone(), p.pipeline.clone(), dk.clone()))
+            && demo_keys.insert((e.clone(), table.label.clone(), dk.clone()))
             && let Some(dm) = store.get(dk)
-            && let Ok(Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. }) = Typed::of(dm)
+            && let Ok(Typed { params, metrics: Metrics::Demos(d) | Metrics::DemosImport(d) }) = Typed::of(dm)
         {
+            let source = match params {
+                Params::DemosImport(i) => format!("the file with sha256 {}", &i.sha256[..12]),
+                _ => "rollouts of its own demonstrator".to_string(),
+            };
+            demo_sources.entry((e.clone(), p.pipeline.clone())).or_default().insert(source);
             for &r in &d.returns {
                 d_env.push(e.clone());
-                d_pipeline.push(p.pipeline.clone());
+                d_pipeline.push(table.label.clone());
                 d_ret.push(r);
             }
+            demo_returns.entry((e.clone(), table.label.clone())).or_default().extend(&d.returns);
         }
+    }
+    if let Some(((e, study), sources)) = demo_sources.iter().find(|(_, s)| s.len() > 1) {
+        let sources: Vec<&str> = sources.iter().map(String::as_str).collect();
+        return Err(Error::Invalid(format!(
+            "{e}: the runs of study `{study}` disagree on the demonstrations ({}); give every pipeline file named \
+             `{study}` the same demos.from, or another name",
+            sources.join(" and ")
+        )));
     }
     let df = |cols: Vec<Column>| DataFrame::new_infer_height(cols).map_err(pe);
     Ok(Long {
+        demo_returns,
         episodes: df(vec![
             Column::new("env".into(), env),
             Column::new("pipeline".into(), pipeline),
@@ -293,15 +345,20 @@ pub struct Tables {
     pub runs: DataFrame,
     pub demos: DataFrame,
     pub accuracy: DataFrame,
+    /// Studies with several replicates: one row per (env, study, method, protocol).
+    pub aggregate: Vec<studies::AggregateRow>,
+    /// Their probabilities of improvement over D-REX and over BC.
+    pub improvement: Vec<studies::ImprovementRow>,
 }
 
 pub fn build(store: &Artifacts) -> Result<Tables> {
     let mut long = collect(store)?;
     let mut protocols = Vec::new();
-    for ((env, pipeline, method), runs) in &mut long.runs {
+    for ((env, table, method), runs) in &mut long.runs {
         runs.sort_by_key(|r| r.run);
-        protocols.extend(protocol_rows(env, pipeline, method, runs));
+        protocols.extend(protocol_rows(env, table, method, runs));
     }
+    let (aggregate, improvement) = studies::aggregate(&protocols, &long.demo_returns);
     let keys = [col("env"), col("pipeline"), col("method")];
     let per_run = long
         .episodes
@@ -350,7 +407,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         .sort(["env", "pipeline", "method"], Default::default())
         .collect()
         .map_err(pe)?;
-    Ok(Tables { returns, protocols, runs, demos, accuracy })
+    Ok(Tables { returns, protocols, runs, demos, accuracy, aggregate, improvement })
 }
 
 /// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
@@ -424,7 +481,8 @@ fn cell_s(df: &DataFrame, name: &str, i: usize) -> String {
 
 /// The paper-style markdown: one row per (env, pipeline).
 pub fn markdown(t: &Tables) -> String {
-    let mut out = String::from("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
+    let mut out = studies::markdown(&t.aggregate, &t.improvement);
+    out.push_str("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
     out.push_str("| env | pipeline | demos avg | demos best | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|---|---|\n");
     let mut rows: Vec<(String, String)> =
         (0..t.returns.height()).map(|i| (cell_s(&t.returns, "env", i), cell_s(&t.returns, "pipeline", i))).collect();

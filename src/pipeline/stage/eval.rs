@@ -35,6 +35,14 @@ fn is_zero(r: &usize) -> bool {
     *r == 0
 }
 
+impl EvalParams {
+    /// The table a run's figures go to: its pipeline's name, and its replicate past the
+    /// first (`study/r3`).
+    pub fn table(&self) -> String {
+        if self.replicate == 0 { self.pipeline.clone() } else { format!("{}/r{}", self.pipeline, self.replicate) }
+    }
+}
+
 /// How the learned reward scores the final policy's evaluation episodes.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RewardAccuracy {

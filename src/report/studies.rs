@@ -1,0 +1,275 @@
+//! Replicated studies: per environment, method and protocol, the replicates' results
+//! aggregated with the statistics of rliable (Agarwal et al., NeurIPS 2021) for few runs.
+//!
+//! The replicate is the unit: a replicate's runs share its BC policy and learned rewards, so
+//! they are not independent of each other. Each replicate's score is the mean of its runs'
+//! mean returns at the protocol's policy; the table gives the mean, interquartile mean and
+//! median of those scores, 95 % intervals that resample replicates and then runs within
+//! them ([`hierarchical_ci`]), the fractions of replicates above the demonstrations'
+//! average and best, and each method's probability of improvement over D-REX and over BC.
+use std::collections::BTreeMap;
+
+use polars::prelude::*;
+
+use super::{Protocol, ProtocolRow, RESAMPLES, num, pe};
+use crate::error::Result;
+use crate::pipeline::Method;
+use crate::stats::{hierarchical_ci, iqm, mean, median, probability_of_improvement, probability_of_improvement_ci};
+
+/// One (env, study, method, protocol) over its replicates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AggregateRow {
+    pub env: String,
+    pub study: String,
+    pub method: String,
+    pub protocol: Protocol,
+    pub replicates: usize,
+    pub runs: usize,
+    /// Of the replicates' scores.
+    pub mean: f64,
+    pub iqm: f64,
+    pub median: f64,
+    pub mean_ci: (f64, f64),
+    pub iqm_ci: (f64, f64),
+    /// The fraction of replicates whose score is above their demonstrations' average, and best.
+    pub above_demos_avg: f64,
+    pub above_demos_best: f64,
+    /// Each replicate's score, in replicate order.
+    pub scores: Vec<(usize, f64)>,
+}
+
+/// P(method beats baseline) over one study's replicates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImprovementRow {
+    pub env: String,
+    pub study: String,
+    pub protocol: Protocol,
+    pub method: String,
+    pub baseline: String,
+    /// Replicates where both were evaluated.
+    pub replicates: usize,
+    pub probability: f64,
+    pub ci: (f64, f64),
+}
+
+fn mean_of(v: &[f64]) -> f64 {
+    mean(v).unwrap_or(f64::NAN)
+}
+
+/// The aggregate rows and probabilities of improvement of every study with two or more
+/// replicates (a single replicate is its own table). `demos` maps (env, table) to the
+/// demonstrations' returns.
+pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f64>>) -> (Vec<AggregateRow>, Vec<ImprovementRow>) {
+    let mut cells: BTreeMap<(&str, &str, Protocol, &str), Vec<&ProtocolRow>> = BTreeMap::new();
+    for r in rows {
+        cells.entry((&r.env, &r.study, r.protocol, &r.method)).or_default().push(r);
+    }
+    let mut replicates: BTreeMap<(&str, &str), std::collections::BTreeSet<usize>> = BTreeMap::new();
+    for r in rows {
+        replicates.entry((&r.env, &r.study)).or_default().insert(r.replicate);
+    }
+    let mut out = Vec::new();
+    for ((env, study, protocol, method), mut cell) in cells {
+        if replicates[&(env, study)].len() < 2 {
+            continue;
+        }
+        cell.sort_by_key(|r| r.replicate);
+        let groups: Vec<Vec<f64>> = cell.iter().map(|r| r.run_means.clone()).collect();
+        let scores: Vec<f64> = groups.iter().map(|g| mean_of(g)).collect();
+        let above = |pick: fn(&[f64]) -> f64| {
+            let judged: Vec<bool> = cell
+                .iter()
+                .zip(&scores)
+                .filter_map(|(r, s)| demos.get(&(env.to_string(), r.pipeline.clone())).map(|d| *s > pick(d)))
+                .collect();
+            judged.iter().filter(|&&b| b).count() as f64 / judged.len().max(1) as f64
+        };
+        out.push(AggregateRow {
+            env: env.into(),
+            study: study.into(),
+            method: method.into(),
+            protocol,
+            replicates: cell.len(),
+            runs: groups.iter().map(Vec::len).sum(),
+            mean: mean_of(&scores),
+            iqm: iqm(&scores),
+            median: median(&scores),
+            mean_ci: hierarchical_ci(&groups, mean_of, RESAMPLES, 0),
+            iqm_ci: hierarchical_ci(&groups, iqm, RESAMPLES, 1),
+            above_demos_avg: above(mean_of),
+            above_demos_best: above(|d| d.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+            scores: cell.iter().map(|r| r.replicate).zip(scores.iter().copied()).collect(),
+        });
+    }
+    let mut improvement = Vec::new();
+    for a in &out {
+        for baseline in [Method::Drex.name(), Method::Bc.name()] {
+            if a.method == baseline {
+                continue;
+            }
+            let Some(b) = out.iter().find(|b| b.env == a.env && b.study == a.study && b.protocol == a.protocol && b.method == baseline)
+            else {
+                continue;
+            };
+            let pairs: Vec<(f64, f64)> =
+                a.scores.iter().filter_map(|(r, x)| b.scores.iter().find(|(rb, _)| rb == r).map(|(_, y)| (*x, *y))).collect();
+            let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
+            improvement.push(ImprovementRow {
+                env: a.env.clone(),
+                study: a.study.clone(),
+                protocol: a.protocol,
+                method: a.method.clone(),
+                baseline: baseline.into(),
+                replicates: pairs.len(),
+                probability: probability_of_improvement(&x, &y),
+                ci: probability_of_improvement_ci(&pairs, RESAMPLES, 2),
+            });
+        }
+    }
+    (out, improvement)
+}
+
+/// `aggregate.csv`: one row per (env, study, method, protocol).
+pub fn aggregate_frame(rows: &[AggregateRow]) -> Result<DataFrame> {
+    let s = |f: &dyn Fn(&AggregateRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
+    let x = |f: &dyn Fn(&AggregateRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    DataFrame::new_infer_height(vec![
+        Column::new("env".into(), s(&|r| r.env.clone())),
+        Column::new("study".into(), s(&|r| r.study.clone())),
+        Column::new("method".into(), s(&|r| r.method.clone())),
+        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
+        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
+        Column::new("runs".into(), rows.iter().map(|r| r.runs as u64).collect::<Vec<_>>()),
+        Column::new("mean".into(), x(&|r| r.mean)),
+        Column::new("mean_ci_low".into(), x(&|r| r.mean_ci.0)),
+        Column::new("mean_ci_high".into(), x(&|r| r.mean_ci.1)),
+        Column::new("iqm".into(), x(&|r| r.iqm)),
+        Column::new("iqm_ci_low".into(), x(&|r| r.iqm_ci.0)),
+        Column::new("iqm_ci_high".into(), x(&|r| r.iqm_ci.1)),
+        Column::new("median".into(), x(&|r| r.median)),
+        Column::new("above_demos_avg".into(), x(&|r| r.above_demos_avg)),
+        Column::new("above_demos_best".into(), x(&|r| r.above_demos_best)),
+    ])
+    .map_err(pe)
+}
+
+/// `improvement.csv`: one row per (env, study, protocol, method, baseline).
+pub fn improvement_frame(rows: &[ImprovementRow]) -> Result<DataFrame> {
+    let s = |f: &dyn Fn(&ImprovementRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
+    let x = |f: &dyn Fn(&ImprovementRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    DataFrame::new_infer_height(vec![
+        Column::new("env".into(), s(&|r| r.env.clone())),
+        Column::new("study".into(), s(&|r| r.study.clone())),
+        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
+        Column::new("method".into(), s(&|r| r.method.clone())),
+        Column::new("baseline".into(), s(&|r| r.baseline.clone())),
+        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
+        Column::new("probability".into(), x(&|r| r.probability)),
+        Column::new("ci_low".into(), x(&|r| r.ci.0)),
+        Column::new("ci_high".into(), x(&|r| r.ci.1)),
+    ])
+    .map_err(pe)
+}
+
+/// The studies' section of `report.md`: per environment and protocol, every method's
+/// aggregate, then the probabilities of improvement.
+pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from(
+        "\n## Replicated studies (per replicate: the mean of its runs' mean returns; 95 % intervals resample replicates, then runs within them)\n",
+    );
+    let mut groups: Vec<(&str, &str, Protocol)> = rows.iter().map(|r| (r.env.as_str(), r.study.as_str(), r.protocol)).collect();
+    groups.sort();
+    groups.dedup();
+    for (env, study, protocol) in groups {
+        out.push_str(&format!(
+            "\n### {env}, study `{study}`: {}\n\n| method | replicates (runs) | mean [95 % CI] | IQM [95 % CI] | median | above demos avg | above demos best | P(> D-REX) [95 % CI] | P(> BC) [95 % CI] |\n|---|---|---|---|---|---|---|---|---|\n",
+            protocol.title()
+        ));
+        for r in rows.iter().filter(|r| r.env == env && r.study == study && r.protocol == protocol) {
+            let p = |baseline: &str| {
+                improvement
+                    .iter()
+                    .find(|i| i.env == env && i.study == study && i.protocol == protocol && i.method == r.method && i.baseline == baseline)
+                    .map_or("-".to_string(), |i| format!("{:.2} [{:.2}, {:.2}]", i.probability, i.ci.0, i.ci.1))
+            };
+            out.push_str(&format!(
+                "| {} | {} ({}) | {} [{}, {}] | {} [{}, {}] | {} | {:.0} % | {:.0} % | {} | {} |\n",
+                r.method,
+                r.replicates,
+                r.runs,
+                num(Some(r.mean)),
+                num(Some(r.mean_ci.0)),
+                num(Some(r.mean_ci.1)),
+                num(Some(r.iqm)),
+                num(Some(r.iqm_ci.0)),
+                num(Some(r.iqm_ci.1)),
+                num(Some(r.median)),
+                100.0 * r.above_demos_avg,
+                100.0 * r.above_demos_best,
+                p(Method::Drex.name()),
+                p(Method::Bc.name()),
+            ));
+        }
+    }
+    out.push('\n');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stats::ReturnStats;
+
+    fn row(study: &str, replicate: usize, method: &str, run_means: &[f64]) -> ProtocolRow {
+        ProtocolRow {
+            env: "Hopper-v5".into(),
+            pipeline: if replicate == 0 { study.into() } else { format!("{study}/r{replicate}") },
+            study: study.into(),
+            replicate,
+            run_means: run_means.to_vec(),
+            method: method.into(),
+            protocol: Protocol::Final,
+            step: None,
+            stats: ReturnStats::of(run_means),
+            runs: run_means.len(),
+            ci: (0.0, 0.0),
+            gap_to_best: None,
+        }
+    }
+
+    /// Replicates 0-1 from one file and 2-3 from another of the same study are one study;
+    /// a single-replicate pipeline beside them is left to its own table.
+    #[test]
+    fn aggregates_a_study_over_its_files_and_replicates() {
+        let mut rows = Vec::new();
+        for (r, drex, bc) in [(0, [0.0, 2.0], 1.0), (1, [10.0, 10.0], 1.0), (2, [4.0, 4.0], 5.0), (3, [6.0, 8.0], 1.0)] {
+            rows.push(row("s", r, "drex", &drex));
+            rows.push(row("s", r, "bc", &[bc]));
+        }
+        rows.push(row("alone", 0, "drex", &[3.0]));
+        let demos: BTreeMap<(String, String), Vec<f64>> =
+            ["s", "s/r1", "s/r2", "s/r3"].iter().map(|t| (("Hopper-v5".to_string(), t.to_string()), vec![2.0, 6.0])).collect();
+        let (agg, imp) = aggregate(&rows, &demos);
+        assert!(agg.iter().all(|a| a.study == "s"), "one replicate is no study");
+        let d = agg.iter().find(|a| a.method == "drex").unwrap();
+        // Scores 1, 10, 4, 7.
+        assert_eq!((d.replicates, d.runs), (4, 8));
+        assert_eq!((d.mean, d.median), (5.5, 5.5));
+        assert_eq!(d.iqm, 5.5, "the middle two of 1, 4, 7, 10");
+        assert!(d.mean_ci.0 < 5.5 && d.mean_ci.1 > 5.5 && d.mean_ci.0 >= 1.0 && d.mean_ci.1 <= 10.0, "{:?}", d.mean_ci);
+        // Above the demonstrations' average 4: 10 and 7; above their best 6: the same two.
+        assert_eq!((d.above_demos_avg, d.above_demos_best), (0.5, 0.5));
+        // D-REX against BC's 1, 1, 5, 1: 1 vs {1,1,5,1} = 1.5, 10 and 7 win all 4, 4 wins 3.
+        let p = imp.iter().find(|i| i.method == "drex" && i.baseline == "bc").unwrap();
+        assert_eq!((p.replicates, p.probability), (4, (1.5 + 4.0 + 3.0 + 4.0) / 16.0));
+        assert!(p.ci.0 <= p.probability && p.probability <= p.ci.1);
+        assert!(imp.iter().all(|i| i.method != i.baseline));
+        let md = markdown(&agg, &imp);
+        assert!(md.contains("| drex | 4 (8) | 5.5 [") && md.contains("study `s`"), "{md}");
+        let csv = aggregate_frame(&agg).unwrap();
+        assert_eq!(csv.height(), 2);
+    }
+}
