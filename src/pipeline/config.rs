@@ -5,12 +5,17 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use crate::algo::noise::NoiseProcess;
-use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
+use crate::algo::{bc::BcConfig, ppo::Backend, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
 use crate::nn::reward::{Combine, Composition, CtrlAction};
 use crate::nn::{Device, DeviceChoice};
 
 pub const SCHEMA_VERSION: u32 = 1;
+
+/// Stored bytes are idrex's own kernels' (the same on every processor); libtorch's PPO
+/// update is a reference for the tests, not a stage.
+const TCH_BACKEND: &str = "ppo.backend tch computes with libtorch's kernels, whose bytes depend on the processor, so no stage uses it; \
+                           remove it (fused, the default, computes the same update)";
 
 /// The methods a pipeline can run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
@@ -514,11 +519,18 @@ impl Pipeline {
             {
                 bad(&["overrides", m.name(), "trex"], format!("overrides.{}.trex: {e}", m.name()));
             }
-            if let Some(v) = &o.ppo
-                && let Err(e) = serde_json::from_value::<PpoConfig>(merge(serde_json::to_value(&spec.ppo).expect("serialises"), v))
+            match o
+                .ppo
+                .as_ref()
+                .map(|v| serde_json::from_value::<PpoConfig>(merge(serde_json::to_value(&spec.ppo).expect("serialises"), v)))
             {
-                bad(&["overrides", m.name(), "ppo"], format!("overrides.{}.ppo: {e}", m.name()));
+                Some(Err(e)) => bad(&["overrides", m.name(), "ppo"], format!("overrides.{}.ppo: {e}", m.name())),
+                Some(Ok(c)) if c.backend == Backend::Tch => bad(&["overrides", m.name(), "ppo"], TCH_BACKEND.into()),
+                _ => {}
             }
+        }
+        if spec.ppo.backend == Backend::Tch {
+            bad(&["ppo", "backend"], TCH_BACKEND.into());
         }
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
             bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
@@ -698,6 +710,8 @@ mod tests {
             assert!(e.starts_with("p.yaml:3:1: ") && e.contains(why) && e.contains("whole number from 1 to 1000"), "{e}");
         }
         assert!(err("version: 1\nenv: Hopper-v5\nfirst_replicate: -1\n").contains("first_replicate is -1"));
+        assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  backend: tch\n").contains("p.yaml:4:3: ppo.backend tch"));
+        assert!(err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      backend: tch\n").contains("ppo.backend tch"));
         assert_eq!(
             err("version: 1\nenv: Hopper-v9\n"),
             "p.yaml:2:1: unknown environment 'Hopper-v9'; known environments: HalfCheetah-v5, Hopper-v5, Walker2d-v5; write e.g. `env: Hopper-v5`"
