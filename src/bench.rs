@@ -351,6 +351,39 @@ fn hidden_layer_gflops() -> (f64, f64) {
     (flop / ours / 1e9, flop / torch / 1e9)
 }
 
+/// The learned reward's inference, as PPO calls it once per rollout (2,048 rows of
+/// HalfCheetah's 17-dimensional observations through 3 models of [256, 256]), in rows per
+/// second, best of 5: idrex's CPU path (`RewardEnsemble::raw`, over `nn::gemm`) and
+/// libtorch's forward pass on the same networks and rows.
+fn reward_inference_rates() -> (f64, f64) {
+    use crate::nn::reward::{RewardConfig, RewardEnsemble};
+    let config = RewardConfig { obs_dim: 17, act_dim: None, hidden: vec![256, 256], models: 3, clip: 100.0, init: Default::default() };
+    let model = crate::nn::seeded(0, || RewardEnsemble::new(config));
+    let rows = 2048;
+    let obs: Vec<f32> = (0..rows * 17).map(|i| (i as f32 * 0.37).sin()).collect();
+    let best = |f: &mut dyn FnMut()| {
+        f();
+        (0..5)
+            .map(|_| {
+                let t = Instant::now();
+                (0..10).for_each(|_| f());
+                t.elapsed().as_secs_f64() / 10.0
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    crate::nn::single_threaded();
+    let ours = best(&mut || _ = model.raw(&obs, &[]));
+    let torch = best(&mut || {
+        tch::no_grad(|| {
+            let x = model.inputs(&obs, &[]);
+            for m in 0..3 {
+                let _: Vec<f32> = Vec::try_from(model.forward(m, &x)).expect("f32 rewards");
+            }
+        })
+    });
+    (rows as f64 / ours, rows as f64 / torch)
+}
+
 /// The seconds that n more iterations take: time(f(2n)) - time(f(n)), which leaves out the
 /// fixed costs (pair sampling, the final accuracy pass) the Python loop does not have.
 fn marginal(n: usize, mut f: impl FnMut(usize) -> anyhow::Result<()>) -> anyhow::Result<f64> {
@@ -389,6 +422,7 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     device.ensure_available()?;
     let peak = gemm_gflops(threads, device);
     let (kernel_gflops, libtorch_gflops) = hidden_layer_gflops();
+    let (reward_rows, torch_reward_rows) = reward_inference_rates();
     let (trex_rate, bc_rate) = learner_rates(args, threads, device)?;
     // On the GPU, the CPU learners are the figure to beat.
     let cpu = if device.is_cpu() { None } else { Some(learner_rates(args, threads, Device::Cpu)?) };
@@ -419,6 +453,9 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         "hidden_layer_one_thread": {
             "idrex_gflops": kernel_gflops, "libtorch_gflops": libtorch_gflops, "ratio": kernel_gflops / libtorch_gflops,
             "fraction_of_gemm_peak_per_thread": kernel_gflops / (peak / threads as f64),
+        },
+        "reward_inference_one_thread": {
+            "idrex_rows_per_s": reward_rows, "libtorch_rows_per_s": torch_reward_rows, "ratio": reward_rows / torch_reward_rows,
         },
         "trex": {
             "idrex_model_iterations_per_s": trex_rate, "pytorch_model_iterations_per_s": pt_trex,
