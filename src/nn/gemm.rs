@@ -332,57 +332,47 @@ unsafe fn scalar(kc: usize, a: *const f32, b: *const f32, ldb: usize, c: *mut f3
 mod x86 {
     use std::arch::x86_64::*;
 
-    /// 6 x 16: twelve accumulators of 8 lanes.
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn avx2(kc: usize, a: *const f32, b: *const f32, ldb: usize, c: *mut f32, rs: usize, load: bool) {
-        const MR: usize = 6;
-        let mut acc = [[_mm256_setzero_ps(); 2]; MR];
-        if load {
-            for (i, row) in acc.iter_mut().enumerate() {
-                row[0] = unsafe { _mm256_loadu_ps(c.add(i * rs)) };
-                row[1] = unsafe { _mm256_loadu_ps(c.add(i * rs + 8)) };
+    /// A micro-kernel of `MR` rows by two vectors of `W` lanes: per row two accumulators, per
+    /// term one broadcast of A's element and two fused multiply-adds.
+    macro_rules! micro_kernel {
+        ($(#[$doc:meta])* $name:ident, $features:literal, $mr:literal, $w:literal,
+         $zero:ident, $load:ident, $store:ident, $set1:ident, $fma:ident) => {
+            $(#[$doc])*
+            #[target_feature(enable = $features)]
+            pub unsafe fn $name(kc: usize, a: *const f32, b: *const f32, ldb: usize, c: *mut f32, rs: usize, load: bool) {
+                const MR: usize = $mr;
+                let mut acc = [[$zero(); 2]; MR];
+                if load {
+                    for (i, row) in acc.iter_mut().enumerate() {
+                        row[0] = unsafe { $load(c.add(i * rs)) };
+                        row[1] = unsafe { $load(c.add(i * rs + $w)) };
+                    }
+                }
+                for p in 0..kc {
+                    let b0 = unsafe { $load(b.add(p * ldb)) };
+                    let b1 = unsafe { $load(b.add(p * ldb + $w)) };
+                    for (i, row) in acc.iter_mut().enumerate() {
+                        let av = $set1(unsafe { *a.add(p * MR + i) });
+                        row[0] = $fma(av, b0, row[0]);
+                        row[1] = $fma(av, b1, row[1]);
+                    }
+                }
+                for (i, row) in acc.iter().enumerate() {
+                    unsafe { $store(c.add(i * rs), row[0]) };
+                    unsafe { $store(c.add(i * rs + $w), row[1]) };
+                }
             }
-        }
-        for p in 0..kc {
-            let b0 = unsafe { _mm256_loadu_ps(b.add(p * ldb)) };
-            let b1 = unsafe { _mm256_loadu_ps(b.add(p * ldb + 8)) };
-            for (i, row) in acc.iter_mut().enumerate() {
-                let av = _mm256_set1_ps(unsafe { *a.add(p * MR + i) });
-                row[0] = _mm256_fmadd_ps(av, b0, row[0]);
-                row[1] = _mm256_fmadd_ps(av, b1, row[1]);
-            }
-        }
-        for (i, row) in acc.iter().enumerate() {
-            unsafe { _mm256_storeu_ps(c.add(i * rs), row[0]) };
-            unsafe { _mm256_storeu_ps(c.add(i * rs + 8), row[1]) };
-        }
+        };
     }
 
-    /// 8 x 32: sixteen accumulators of 16 lanes.
-    #[target_feature(enable = "avx512f,fma")]
-    pub unsafe fn avx512(kc: usize, a: *const f32, b: *const f32, ldb: usize, c: *mut f32, rs: usize, load: bool) {
-        const MR: usize = 8;
-        let mut acc = [[_mm512_setzero_ps(); 2]; MR];
-        if load {
-            for (i, row) in acc.iter_mut().enumerate() {
-                row[0] = unsafe { _mm512_loadu_ps(c.add(i * rs)) };
-                row[1] = unsafe { _mm512_loadu_ps(c.add(i * rs + 16)) };
-            }
-        }
-        for p in 0..kc {
-            let b0 = unsafe { _mm512_loadu_ps(b.add(p * ldb)) };
-            let b1 = unsafe { _mm512_loadu_ps(b.add(p * ldb + 16)) };
-            for (i, row) in acc.iter_mut().enumerate() {
-                let av = _mm512_set1_ps(unsafe { *a.add(p * MR + i) });
-                row[0] = _mm512_fmadd_ps(av, b0, row[0]);
-                row[1] = _mm512_fmadd_ps(av, b1, row[1]);
-            }
-        }
-        for (i, row) in acc.iter().enumerate() {
-            unsafe { _mm512_storeu_ps(c.add(i * rs), row[0]) };
-            unsafe { _mm512_storeu_ps(c.add(i * rs + 16), row[1]) };
-        }
-    }
+    micro_kernel!(
+        /// 6 x 16: twelve accumulators of 8 lanes.
+        avx2, "avx2,fma", 6, 8, _mm256_setzero_ps, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_set1_ps, _mm256_fmadd_ps
+    );
+    micro_kernel!(
+        /// 8 x 32: sixteen accumulators of 16 lanes.
+        avx512, "avx512f,fma", 8, 16, _mm512_setzero_ps, _mm512_loadu_ps, _mm512_storeu_ps, _mm512_set1_ps, _mm512_fmadd_ps
+    );
 }
 
 /// [`gemm`] on a chosen variant (tests and benchmarks compare them).
