@@ -61,6 +61,10 @@ pub enum BenchCommand {
     /// T-REX and BC training speed at the report's shapes next to the same loops in PyTorch
     /// (run by this command), and the fraction of the machine's fp32 matrix-product rate.
     Learners(crate::bench::LearnersBenchArgs),
+    /// A PPO run at CleanRL's settings broken down by phase (environment, policy inference,
+    /// reward, update, the rest), next to the environment's mj_step bound measured in the
+    /// same run.
+    Ppo(crate::bench::PpoBenchArgs),
 }
 
 pub fn init_tracing(verbose: u8) {
@@ -85,6 +89,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Env(args)) => crate::bench::env_bench(&args),
         Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
         Command::Bench(BenchCommand::Learners(args)) => crate::bench::learners_bench(&args),
+        Command::Bench(BenchCommand::Ppo(args)) => crate::bench::ppo_bench(&args),
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),

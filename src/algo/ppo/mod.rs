@@ -143,6 +143,25 @@ pub struct PpoResult {
     pub policy: ActorCritic,
     pub curve: Vec<PpoProgress>,
     pub wall_s: f64,
+    /// Where the wall time went (for `idrex bench ppo`; never stored).
+    pub phases: Phases,
+}
+
+/// Seconds of a PPO run by phase.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Phases {
+    /// `VecEnv::step`: the physics and the environments' own bookkeeping.
+    pub env_s: f64,
+    /// The rest of the rollout: normalising observations, the policy's and critic's
+    /// forward passes, sampling and clipping actions, filling the buffer.
+    pub policy_s: f64,
+    /// The reward PPO trains on (the learned ensemble's inference and composition, or the
+    /// environment's), its scaling, bootstrap values and GAE.
+    pub reward_s: f64,
+    /// The minibatch updates.
+    pub update_s: f64,
+    /// Everything else: evaluations, checkpoints, statistics.
+    pub other_s: f64,
 }
 
 /// Receives the policy and the global step every `checkpoint_every` updates.
@@ -196,6 +215,7 @@ pub fn train(
     let mut global_step = 0;
     let mut episode_learned = vec![0.0f64; n];
     let mut scratch = Vec::new();
+    let mut phases = Phases::default();
 
     for update in 1..=updates {
         let upd_start = Instant::now();
@@ -203,8 +223,11 @@ pub fn train(
         agent.obs_norm = Some(norm.obs.clone());
         let policy = agent.to_cpu();
 
-        let ended_true = collect(&mut envs, &policy, &mut norm, &mut buf, &mut obs, &mut rng)?;
+        let t = Instant::now();
+        let ended_true = collect(&mut envs, &policy, &mut norm, &mut buf, &mut obs, &mut rng, &mut phases.env_s)?;
+        phases.policy_s += t.elapsed().as_secs_f64();
         global_step += batch;
+        let t = Instant::now();
 
         // Rewards: the environment's or the learned one, then return-based scaling.
         let mut rewards: Vec<f64> = match &mut reward {
@@ -235,6 +258,8 @@ pub fn train(
         }
         let next_values: Vec<f32> = (0..n).map(|i| policy.value(&norm.obs(&obs[i * od..(i + 1) * od]), &mut scratch)).collect();
         let (advantages, returns) = buf.advantages(&rewards, &next_values, cfg.gamma, cfg.gae_lambda);
+        phases.reward_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
 
         let stats = updater.update(
             &mut agent,
@@ -251,6 +276,7 @@ pub fn train(
             lr,
             &mut rng,
         )?;
+        phases.update_s += t.elapsed().as_secs_f64();
 
         if !(stats.policy_loss.is_finite() && stats.value_loss.is_finite()) || rewards.iter().any(|r| !r.is_finite()) {
             return Err(Error::Diverged(format!(
@@ -295,11 +321,16 @@ pub fn train(
         }
     }
     agent.obs_norm = Some(norm.obs);
-    Ok(PpoResult { policy: agent, curve, wall_s: started.elapsed().as_secs_f64() })
+    let wall_s = started.elapsed().as_secs_f64();
+    // The rollout's time includes the environment's; each phase is counted once.
+    phases.policy_s -= phases.env_s;
+    phases.other_s = wall_s - phases.env_s - phases.policy_s - phases.reward_s - phases.update_s;
+    Ok(PpoResult { policy: agent, curve, wall_s, phases })
 }
 
 /// Steps every environment `num_steps` times with the current policy, filling `buf`;
-/// returns the ground-truth returns of the episodes that ended.
+/// returns the ground-truth returns of the episodes that ended. Adds the seconds spent in
+/// the environments' steps to `env_s`.
 fn collect(
     envs: &mut VecEnv,
     policy: &CpuPolicy,
@@ -307,6 +338,7 @@ fn collect(
     buf: &mut RolloutBuffer,
     obs: &mut [f32],
     rng: &mut ChaCha8Rng,
+    env_s: &mut f64,
 ) -> Result<Vec<f64>> {
     let (n, od, ad) = (buf.num_envs, buf.obs_dim, buf.act_dim);
     let (low, high) = {
@@ -331,7 +363,9 @@ fn collect(
             }
         }
         buf.clipped_actions[t * n * ad..(t + 1) * n * ad].copy_from_slice(&act);
+        let stepping = Instant::now();
         let step = envs.step(&act)?;
+        *env_s += stepping.elapsed().as_secs_f64();
         for i in 0..n {
             let k = t * n + i;
             buf.env_rewards[k] = step.rewards[i];
