@@ -16,7 +16,7 @@
 use tch::Tensor;
 
 use super::gemm::Kernel;
-pub use super::gemm::gemm;
+use super::gemm::gemm;
 use super::{Activation, FlushDenormals, Mlp};
 
 /// Every batch is split into this many lanes, whose gradients are summed in lane order; a
