@@ -1,6 +1,8 @@
 //! `idrex bench env`: environment throughput, each figure next to a baseline measured in the
 //! same run: the raw mj_step rate of the same model over the same transitions, Gymnasium's
 //! Python environment (run by the same command), and one thread for the vectorised env.
+pub mod clones;
+
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -21,6 +21,11 @@ pub enum Purpose {
     CloneTraining,
     /// Multi-BC: the r-th clone's epsilon-greedy rollouts.
     CloneRollouts,
+    /// Multi-BC: the r-th clone's noise-free fidelity episodes.
+    CloneFidelity,
+    /// The k-th episode of the uniform-random policy a stage measures as its zero.
+    RandomBaseline,
+
     /// T-REX: model m's pairs and minibatches.
     TrexModel,
     /// PPO: the evaluation after update u (its episodes are `seed + k`).
@@ -38,6 +43,8 @@ pub fn derive(seed: u64, purpose: Purpose, index: u64) -> u64 {
         Purpose::CloneDemo => episode(seed, 10_000 + index),
         Purpose::CloneTraining => episode(seed, index),
         Purpose::CloneRollouts => episode(seed, 20_000 + index),
+        Purpose::CloneFidelity => episode(seed, 30_000 + index),
+        Purpose::RandomBaseline => episode(seed, 40_000 + index),
         Purpose::TrexModel => seed.wrapping_mul(1000).wrapping_add(index),
         Purpose::PpoEval => seed.wrapping_add(1_000_000 + index),
         Purpose::ActorNoise => seed ^ 0x9e37_79b9_7f4a_7c15,
@@ -51,7 +58,15 @@ mod tests {
     #[test]
     fn streams_of_one_stage_do_not_collide() {
         let mut seen = std::collections::BTreeSet::new();
-        for purpose in [Purpose::Episode, Purpose::EvalEpisode, Purpose::CloneDemo, Purpose::CloneRollouts, Purpose::TrexModel] {
+        for purpose in [
+            Purpose::Episode,
+            Purpose::EvalEpisode,
+            Purpose::CloneDemo,
+            Purpose::CloneRollouts,
+            Purpose::CloneFidelity,
+            Purpose::RandomBaseline,
+            Purpose::TrexModel,
+        ] {
             for k in 0..200 {
                 assert!(seen.insert(derive(7, purpose, k)), "{purpose:?} {k}");
             }

@@ -143,18 +143,18 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     // The reference: the smoke pipeline run here into a local store.
     ok(idrex(&base, &["pipeline", "run", smoke, "--store", "local", "--jobs", "2"]));
     let reference = digests(&Store::at(base.join("local")));
-    assert_eq!(reference.len(), 28);
+    assert_eq!(reference.len(), 29);
 
     // 1. Submitted through Slurm into S3: same keys, same bytes.
     let out = ok(idrex(&base, &["pipeline", "run", smoke, "--store", &s3("a"), "--executor", "slurm", "--log-dir", "logs-a"]));
-    assert_eq!(submitted(&out).len(), 28, "{out}");
+    assert_eq!(submitted(&out).len(), 29, "{out}");
     let status = wait_settled(&base, smoke, &s3("a"), limit);
-    assert!(status.lines().last().unwrap().ends_with("28 stored"), "{status}");
+    assert!(status.lines().last().unwrap().ends_with("29 stored"), "{status}");
     assert_eq!(digests(&s3_store("a")), reference, "Slurm + S3 made other bytes than a local run");
     let again = ok(idrex(&base, &["pipeline", "run", smoke, "--store", &s3("a"), "--executor", "slurm", "--log-dir", "logs-a"]));
-    assert!(submitted(&again).is_empty() && again.contains("28 stored"), "{again}");
+    assert!(submitted(&again).is_empty() && again.contains("29 stored"), "{again}");
     let verified = ok(idrex(&base, &["verify", "--store", &s3("a")]));
-    assert!(verified.contains("28 artifacts, 0 corrupt"), "{verified}");
+    assert!(verified.contains("29 artifacts, 0 corrupt"), "{verified}");
     // The report reads the bucket like a directory.
     let report = ok(idrex(&base, &["report", "--store", &s3("a"), "--out", "report-a"]));
     assert!(report.contains("| Hopper-v5 | smoke |"), "{report}");
@@ -190,16 +190,16 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     both.sort();
     let before = both.len();
     both.dedup();
-    assert_eq!((before, both.len()), (28, 28), "each node submitted once in all:\n{x}\n{y}");
+    assert_eq!((before, both.len()), (29, 29), "each node submitted once in all:\n{x}\n{y}");
     wait_settled(&base, smoke, &s3("b"), limit);
     let computed = std::fs::read_dir(base.join("logs-b"))
         .unwrap()
         .flatten()
         .filter(|e| std::fs::read_to_string(e.path()).unwrap_or_default().contains("computed in"))
         .count();
-    assert_eq!(computed, 28, "every node computed exactly once");
-    assert_eq!(digests(&s3_store("b")).len(), 28);
-    assert!(ok(idrex(&base, &["verify", "--store", &s3("b")])).contains("28 artifacts, 0 corrupt"));
+    assert_eq!(computed, 29, "every node computed exactly once");
+    assert_eq!(digests(&s3_store("b")).len(), 29);
+    assert!(ok(idrex(&base, &["verify", "--store", &s3("b")])).contains("29 artifacts, 0 corrupt"));
 
     // 4. A job killed mid-way: it and what depends on it show as failed (nothing pends
     // forever), and a resubmission completes the pipeline.
@@ -221,9 +221,9 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     std::thread::sleep(Duration::from_secs(1));
     assert!(Command::new("scancel").arg(&first).status().unwrap().success());
     let status = wait_settled(&base, slow, &s3("c"), limit);
-    assert!(status.lines().last().unwrap().ends_with("28 failed"), "{status}");
+    assert!(status.lines().last().unwrap().ends_with("29 failed"), "{status}");
     let out = ok(idrex(&base, &["pipeline", "run", slow, "--store", &s3("c"), "--executor", "slurm", "--log-dir", "logs-c"]));
-    assert_eq!(submitted(&out).len(), 28, "{out}");
+    assert_eq!(submitted(&out).len(), 29, "{out}");
     let status = wait_settled(&base, slow, &s3("c"), limit);
     assert!(status.lines().last().unwrap().ends_with("28 stored"), "{status}");
 
@@ -256,8 +256,8 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
         .unwrap();
     let gc = ok(idrex(&base, &["gc", one_seed.to_str().unwrap(), "--store", &s3("a"), "--yes"]));
     let removed: usize = gc.lines().last().unwrap().split_whitespace().next().unwrap().parse().unwrap();
-    assert!(removed > 0 && removed < 28, "{gc}");
+    assert!(removed > 0 && removed < 29, "{gc}");
     let verified = ok(idrex(&base, &["verify", "--store", &s3("a")]));
-    assert!(verified.contains(&format!("{} artifacts, 0 corrupt", 28 - removed)), "{verified}");
+    assert!(verified.contains(&format!("{} artifacts, 0 corrupt", 29 - removed)), "{verified}");
     true
 }

@@ -72,7 +72,7 @@ fn smoke_pipeline_end_to_end() {
         }
     }
     assert!(printed.contains("ViewportBlueprint:auto_views"), "the recording has no blueprint");
-    assert_eq!(views.len(), 7, "one view per figure: {views:?}");
+    assert_eq!(views.len(), 8, "one view per figure (multi-BC's clones among them): {views:?}");
     assert_eq!(timelines.into_iter().collect::<Vec<_>>(), vec!["x".to_string()], "plotted rows carry only the plot timeline");
 
     // Every rollout file opens in Python's mcap reader with monotonic log times.
@@ -118,10 +118,25 @@ print("ok", len(sys.argv) - 1)
     // multi-BC's clone filter kept.
     assert!(md.contains(" episodes) |"), "{md}");
     assert!(md.contains("## Notes") && md.contains("held-out training pairs") && md.contains("the clone filter kept"), "{md}");
+    // Multi-BC kept at least one clone, so its reward saw rankings of its own and its results
+    // are not D-REX's; every clone is in clones.csv with its fidelity.
+    let clones = py(
+        "import csv,sys; rows = list(csv.DictReader(open(sys.argv[1]))); print(len(rows), sum(r['kept'] == 'true' for r in rows), all(r['source_return'] and r['clone_return'] for r in rows))",
+        &[out_dir.join("clones.csv").to_str().unwrap()],
+    );
+    let counts: Vec<&str> = clones.split_whitespace().collect();
+    assert_eq!(counts[0], "2", "one clone per D-REX run: {clones}");
+    assert!(counts[1] != "0" && counts[2] == "True", "the filter kept a clone: {clones}");
+    let means = py(
+        "import csv,sys; rows = {r['method']: r['mean'] for r in csv.DictReader(open(sys.argv[1]))}; print(rows['drex'], rows['idrex-multi-bc'])",
+        &[out_dir.join("returns.csv").to_str().unwrap()],
+    );
+    let means: Vec<&str> = means.split_whitespace().collect();
+    assert_ne!(means[0], means[1], "multi-BC's results are its own");
     // The figures: SVG and PNG of each kind, linked from report.md; every PNG decodes at its
     // size and is not blank (many colours, a good share of non-white pixels).
     let figures = out_dir.join("figures");
-    for kind in ["degradation", "reward-drex", "reward-idrex-multi-bc", "ppo", "final"] {
+    for kind in ["degradation", "reward-drex", "reward-idrex-multi-bc", "ppo", "final", "clones"] {
         let stem = format!("hopper-v5-smoke-{kind}");
         assert!(md.contains(&format!("figures/{stem}.png")), "{stem} linked: {md}");
         let svg = std::fs::read_to_string(figures.join(format!("{stem}.svg"))).unwrap();
@@ -365,7 +380,9 @@ fn changing_one_parameter_invalidates_exactly_its_descendants() {
     let changed = Pipeline::parse(&repo("pipelines/smoke.yaml"), &text.replace("  iterations: 100\n", "  iterations: 101\n")).unwrap();
     let (g, k1, k2) = (expand(&base).unwrap(), expand(&base).unwrap().keys(), expand(&changed).unwrap().keys());
     let differ: Vec<&String> = k1.keys().filter(|n| k1[*n] != k2[*n]).collect();
-    let mut expected: Vec<String> = g.nodes.iter().filter(|n| n.name.ends_with("/trex")).flat_map(|n| g.descendants(&n.name)).collect();
+    // T-REX's stages: the rewards, and multi-BC's judge (trained like the reward before it).
+    let mut expected: Vec<String> =
+        g.nodes.iter().filter(|n| n.name.ends_with("/trex") || n.name.ends_with("/judge")).flat_map(|n| g.descendants(&n.name)).collect();
     expected.sort();
     expected.dedup();
     let mut differ: Vec<String> = differ.into_iter().cloned().collect();
@@ -406,7 +423,7 @@ fn bytes_depend_on_the_key_alone() {
     run("one", "1");
     run("two", "2");
     let (one, two) = (digests(&dir.join("one")), digests(&dir.join("two")));
-    assert_eq!(one.len(), 28);
+    assert_eq!(one.len(), 29);
     assert_eq!(one, two, "every artifact's bytes are the same with --jobs 1 and --jobs 2");
 
     // Recomputing stored artifacts from their manifests gives the same bytes...
@@ -437,7 +454,7 @@ fn bytes_depend_on_the_key_alone() {
     assert!(idrex(&["verify", "--store", store.to_str().unwrap()]).status.success());
     let v = idrex(&["verify", "--store", store.to_str().unwrap(), "--recompute"]);
     assert!(!v.status.success());
-    assert!(stdout(&v).contains("curve.csv") && stdout(&v).contains("28 recomputed, 1 differ"), "{}", stdout(&v));
+    assert!(stdout(&v).contains("curve.csv") && stdout(&v).contains("29 recomputed, 1 differ"), "{}", stdout(&v));
     assert!(stderr(&v).contains("do not depend on their key alone"), "{}", stderr(&v));
 }
 
@@ -462,7 +479,7 @@ fn bytes_are_the_same_on_every_kernel_variant() {
     let (out, scalar_store) = run("scalar", &[("IDREX_KERNEL", "scalar")]);
     assert!(out.status.success(), "{}", stderr(&out));
     let reference = digests(&scalar_store);
-    assert_eq!(reference.len(), 28);
+    assert_eq!(reference.len(), 29);
     let manifests: Vec<String> =
         artifact_dirs(&scalar_store).iter().map(|d| std::fs::read_to_string(d.join("manifest.json")).unwrap()).collect();
     assert!(manifests.iter().all(|m| m.contains("\"kernel\": \"scalar\"")), "{}", manifests[0]);

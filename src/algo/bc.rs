@@ -26,6 +26,19 @@ pub struct BcConfig {
     pub val_fraction: f64,
     /// Initialisation of the network.
     pub init: WeightInit,
+    /// Stop when the validation loss stops improving, keeping the best weights; absent (the
+    /// default, and from the key): train for `iterations`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub early_stopping: Option<EarlyStopping>,
+}
+
+/// Early stopping on the validation loss: measured every `every` iterations, training
+/// stops after `patience` measurements without a new best, and the best weights are kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EarlyStopping {
+    pub every: usize,
+    pub patience: usize,
 }
 
 impl Default for BcConfig {
@@ -38,6 +51,7 @@ impl Default for BcConfig {
             l2: 1e-3,
             val_fraction: 0.2,
             init: WeightInit::TorchDefault,
+            early_stopping: None,
         }
     }
 }
@@ -52,6 +66,11 @@ pub struct BcReport {
     /// NaN (stored as null) without validation steps.
     #[serde(with = "crate::stats::nan_as_null")]
     pub val_loss: f64,
+    /// With early stopping: the iteration whose weights were kept and how many ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub best_iteration: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations_run: Option<usize>,
 }
 
 fn pairs(trajs: &[Trajectory]) -> (Vec<f32>, Vec<f32>, usize, usize) {
@@ -83,7 +102,7 @@ struct Lane {
 
 /// The demonstration steps, split into training and validation rows, and the generator
 /// that then draws the batches: what both training paths start from.
-struct Data {
+pub(crate) struct Data {
     x: Vec<f32>,
     y: Vec<f32>,
     od: usize,
@@ -94,19 +113,48 @@ struct Data {
 }
 
 impl Data {
-    fn new(trajs: &[Trajectory], cfg: &BcConfig, seed: u64) -> Result<Data> {
+    /// The steps of `trajs`, a `val_fraction` of them held out; or, given `held_out`, all of
+    /// `trajs` for training and `held_out`'s steps for validation.
+    fn new(trajs: &[Trajectory], held_out: Option<&[Trajectory]>, cfg: &BcConfig, seed: u64) -> Result<Data> {
         if trajs.iter().all(|t| t.is_empty()) {
             return Err(Error::Invalid("behavioural cloning needs at least one demonstration step".into()));
         }
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        if let Some(held_out) = held_out {
+            let all: Vec<Trajectory> = trajs.iter().chain(held_out).cloned().collect();
+            let (x, y, od, ad) = pairs(&all);
+            let n_train: usize = trajs.iter().map(Trajectory::len).sum();
+            let (train, val) = ((0..n_train).collect(), (n_train..x.len() / od).collect());
+            return Ok(Data { x, y, od, ad, train, val, rng });
+        }
         let (x, y, od, ad) = pairs(trajs);
         let n = x.len() / od;
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut idx: Vec<usize> = (0..n).collect();
         idx.shuffle(&mut rng);
         let n_val = ((n as f64) * cfg.val_fraction).round() as usize;
         let n_val = n_val.min(n.saturating_sub(1));
         let train = idx.split_off(n_val);
         Ok(Data { x, y, od, ad, train, val: idx, rng })
+    }
+
+    /// The validation loss of the network being trained (mean summed squared error).
+    fn val_loss(&self, net: &crate::nn::dense::Dense, out: &mut Vec<f32>) -> f64 {
+        let mut x = Vec::with_capacity(self.val.len() * self.od);
+        for &r in &self.val {
+            x.extend_from_slice(&self.x[r * self.od..(r + 1) * self.od]);
+        }
+        out.clear();
+        net.predict(&x, self.val.len(), out);
+        let sse: f64 = self
+            .val
+            .iter()
+            .enumerate()
+            .map(|(i, &r)| {
+                let (p, t) = (&out[i * self.ad..(i + 1) * self.ad], &self.y[r * self.ad..(r + 1) * self.ad]);
+                p.iter().zip(t).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>()
+            })
+            .sum();
+        sse / self.val.len().max(1) as f64
     }
 
     /// The next batch's rows.
@@ -139,6 +187,8 @@ impl Data {
             val_steps: self.val.len(),
             train_loss: loss(&self.train),
             val_loss: if self.val.is_empty() { f64::NAN } else { loss(&self.val) },
+            best_iteration: None,
+            iterations_run: None,
         })
     }
 }
@@ -155,17 +205,33 @@ fn non_finite(cfg: &BcConfig) -> Error {
 /// `workers` threads (the result does not depend on how many: see [`crate::nn::dense`]), or
 /// on the GPU ([`train_torch`]).
 pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize, device: Device) -> Result<(ActorCritic, BcReport)> {
+    train_validated(trajs, None, cfg, seed, workers, device)
+}
+
+/// [`train`], validated on `held_out`'s steps (for example whole episodes the training set
+/// lacks) instead of a fraction of the training steps. Early stopping runs on the CPU path.
+pub fn train_validated(
+    trajs: &[Trajectory],
+    held_out: Option<&[Trajectory]>,
+    cfg: &BcConfig,
+    seed: u64,
+    workers: usize,
+    device: Device,
+) -> Result<(ActorCritic, BcReport)> {
+    let data = Data::new(trajs, held_out, cfg, seed)?;
     match device {
-        Device::Cpu => train_dense(trajs, cfg, seed, workers),
+        Device::Cpu => train_dense(data, cfg, seed, workers),
         Device::Cuda => {
             device.ensure_available()?;
-            train_torch(trajs, cfg, seed, device.tch())
+            if cfg.early_stopping.is_some() {
+                return Err(Error::Invalid("bc.early_stopping runs on the CPU only; remove it or set device: cpu".into()));
+            }
+            train_torch(data, cfg, seed, device.tch())
         }
     }
 }
 
-fn train_dense(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
-    let mut data = Data::new(trajs, cfg, seed)?;
+fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
     let (od, ad) = (data.od, data.ad);
     let policy = data.policy(cfg, seed);
     let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers);
@@ -181,7 +247,26 @@ fn train_dense(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) 
         .collect();
     let batch = cfg.batch_size.min(data.train.len());
     let scale = 2.0 / batch as f32;
+    let stopping = cfg.early_stopping.filter(|_| !data.val.is_empty());
+    // (validation loss, iteration, weights) of the best measurement so far.
+    let mut best: Option<(f64, usize, Vec<f32>)> = None;
+    let (mut since_best, mut out, mut ran) = (0, Vec::new(), cfg.iterations);
     for it in 0..cfg.iterations {
+        if let Some(es) = stopping
+            && it % es.every.max(1) == 0
+        {
+            let v = data.val_loss(&trainer.net, &mut out);
+            if best.as_ref().is_none_or(|(b, _, _)| v < *b) {
+                best = Some((v, it, trainer.net.params.to_vec()));
+                since_best = 0;
+            } else {
+                since_best += 1;
+                if since_best >= es.patience.max(1) {
+                    ran = it;
+                    break;
+                }
+            }
+        }
         let picks = data.picks(batch);
         let (x, y) = (&data.x, &data.y);
         trainer.run(&mut lanes, &picks, |lane, mine, net| {
@@ -210,10 +295,23 @@ fn train_dense(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) 
         }
         trainer.step(lanes.iter().map(|l| &l.grads[..]));
     }
+    let mut kept = None;
+    if stopping.is_some() {
+        // The end of training is a measurement too.
+        let v = data.val_loss(&trainer.net, &mut out);
+        match best {
+            Some((b, it, w)) if b <= v => {
+                trainer.net.params.copy_from_slice(&w);
+                trainer.net.refresh();
+                kept = Some(it);
+            }
+            _ => kept = Some(ran),
+        }
+    }
     if !trainer.write_to(&policy.actor) {
         return Err(non_finite(cfg));
     }
-    let report = data.report(&policy);
+    let report = BcReport { best_iteration: kept, iterations_run: kept.map(|_| ran), ..data.report(&policy) };
     Ok((policy, report))
 }
 
@@ -222,8 +320,7 @@ fn train_dense(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize) 
 /// up to the order of floating-point sums (`tests::torch_path_follows_the_cpu_path`). The
 /// steps stay on the device and a batch is 128 row indices: the host reads the loss back
 /// only every 100 iterations.
-pub(crate) fn train_torch(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, dev: tch::Device) -> Result<(ActorCritic, BcReport)> {
-    let mut data = Data::new(trajs, cfg, seed)?;
+pub(crate) fn train_torch(mut data: Data, cfg: &BcConfig, seed: u64, dev: tch::Device) -> Result<(ActorCritic, BcReport)> {
     let mut policy = data.policy(cfg, seed);
     policy.vs.set_device(dev);
     let all: Vec<usize> = (0..data.x.len() / data.od).collect();
@@ -321,7 +418,7 @@ mod tests {
         let trajs: Vec<_> = (0..3).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 300, batch_size: 50, ..Default::default() };
         let (dense, dr) = train(&trajs, &cfg, 3, 1, Device::Cpu).unwrap();
-        let (torch, tr) = train_torch(&trajs, &cfg, 3, tch::Device::Cpu).unwrap();
+        let (torch, tr) = train_torch(Data::new(&trajs, None, &cfg, 3).unwrap(), &cfg, 3, tch::Device::Cpu).unwrap();
         // The root-mean-square difference of two policies' actions on a fresh episode.
         let fresh = rollout::episode(&mut env, &mut Linear, 50, Default::default());
         let obs = Tensor::from_slice(&fresh.obs[..fresh.len() * fresh.obs_dim]).view([fresh.len() as i64, fresh.obs_dim as i64]);
@@ -337,7 +434,7 @@ mod tests {
         let (early, _) = train(&trajs, &BcConfig { iterations: 30, ..cfg.clone() }, 3, 1, Device::Cpu).unwrap();
         let far = gap(&dense, &early);
         assert!(far > 10.0 * close, "{far} vs {close}");
-        let (again, ar) = train_torch(&trajs, &cfg, 3, tch::Device::Cpu).unwrap();
+        let (again, ar) = train_torch(Data::new(&trajs, None, &cfg, 3).unwrap(), &cfg, 3, tch::Device::Cpu).unwrap();
         assert_eq!(weights(&again), weights(&torch));
         assert_eq!(ar, tr);
     }

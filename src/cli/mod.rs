@@ -3,7 +3,7 @@
 //! the library returns [`crate::Error`].
 mod env;
 mod logs;
-mod pipeline;
+pub(crate) mod pipeline;
 mod report;
 mod stage;
 mod store;
@@ -65,6 +65,9 @@ pub enum BenchCommand {
     /// reward, update, the rest), next to the environment's mj_step bound measured in the
     /// same run.
     Ppo(crate::bench::PpoBenchArgs),
+    /// Multi-BC's clone settings on a pipeline's stored D-REX runs: each clone's noise-free
+    /// true return against its source's (0 = uniform-random, 1 = the source).
+    Clones(crate::bench::clones::ClonesBenchArgs),
 }
 
 pub fn init_tracing(verbose: u8) {
@@ -90,6 +93,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
         Command::Bench(BenchCommand::Learners(args)) => crate::bench::learners_bench(&args),
         Command::Bench(BenchCommand::Ppo(args)) => crate::bench::ppo_bench(&args),
+        Command::Bench(BenchCommand::Clones(args)) => crate::bench::clones::clones_bench(&args),
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),

@@ -40,8 +40,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             crate::report::write_csv(&mut crate::report::studies::aggregate_frame(&t.aggregate)?, &args.out.join("aggregate.csv"))?;
             crate::report::write_csv(&mut crate::report::studies::improvement_frame(&t.improvement)?, &args.out.join("improvement.csv"))?;
         }
+        if !t.clones.is_empty() {
+            crate::report::write_csv(&mut crate::report::clones::frame(&t.clones)?, &args.out.join("clones.csv"))?;
+        }
     }
-    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &args.out.join("figures"))?;
+    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"))?;
     let notes = crate::report::notes(&store)?;
     let md = format!("{}{notes}{}", crate::report::markdown(&t), crate::report::figures::markdown(&figures, "figures"));
     if args.format != ReportFormat::Csv {

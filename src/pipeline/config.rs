@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use super::idrex::{clone::CloneConfig, multi_bc::CloneFilter};
 use crate::algo::noise::NoiseProcess;
 use crate::algo::{bc::BcConfig, ppo::Backend, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
@@ -173,6 +174,11 @@ pub struct IdrexConfig {
     /// Variant 3: epsilon schedule for the clones and rollouts per level (1 in the original).
     pub multi_bc_schedule: Vec<f64>,
     pub multi_bc_rollouts_per_level: usize,
+    /// Variant 3: how the clones are made.
+    pub multi_bc: CloneConfig,
+    /// Variant 3: which clones join the ranked set: none (keep all: the original code),
+    /// previous-reward, or held-out-reward.
+    pub multi_bc_filter: CloneFilter,
 }
 
 impl Default for IdrexConfig {
@@ -184,6 +190,8 @@ impl Default for IdrexConfig {
             rollouts_per_level: 5,
             multi_bc_schedule: (0..20).map(|i| i as f64 * 0.05).collect(),
             multi_bc_rollouts_per_level: 1,
+            multi_bc: CloneConfig::default(),
+            multi_bc_filter: CloneFilter::default(),
         }
     }
 }
@@ -534,6 +542,9 @@ impl Pipeline {
         }
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
             bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
+        }
+        if let Err(e) = spec.idrex.multi_bc.check() {
+            bad(&["idrex", "multi_bc"], e);
         }
         let base = path.parent().unwrap_or(Path::new("."));
         let store = match &spec.store {

@@ -132,6 +132,7 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         }
     };
     let mut unseen: BTreeMap<String, (String, Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    let mut has_clones = false;
     let mut lines = vec![format!("# {name}\n\n| node | kind | status |\n|---|---|---|")];
     for n in &g.nodes {
         let status = outcomes.iter().find(|o| o.node == n.name).map_or("-", |o| status_name(&o.status));
@@ -141,7 +142,14 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         match &m {
             Metrics::NoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
             Metrics::InterpolationRollouts(x) | Metrics::ActionNoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
-            Metrics::MultiBcRollouts(x) => degradation_curve(&n.name, &x.degradation),
+            Metrics::MultiBcRollouts(x) => {
+                degradation_curve(&n.name, &x.degradation);
+                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+                let (sources, clones): (Vec<f64>, Vec<f64>) =
+                    x.clones.iter().map(|c| (mean(&c.fidelity.source_returns), mean(&c.fidelity.clone_returns))).unzip();
+                scatter(&format!("clones/{e}"), &format!("{}: clones", n.name), &sources, &clones);
+                has_clones = true;
+            }
             Metrics::Trex(t) => {
                 let set = &t.train_set.scored;
                 scatter(&format!("reward/{e}/training_set"), &format!("{}: training set", n.name), &set.truth, &set.predicted);
@@ -182,17 +190,18 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
     checkpoint_curves(&rec, g, &metrics);
     rec.markdown("pipeline", &lines.join("\n"));
     let plot = |title: &str, root: &str| Panel::Plot { title: title.into(), contents: vec![format!("+ /{root}/**")] };
-    rec.layout(
-        path,
-        vec![
-            plot("Return against noise level (x: noise level in ‰)", "degradation"),
-            plot("Learned against true return (x: true return; y: predicted return)", "reward"),
-            plot("PPO checkpoints: true return (x: environment step; ◆ chosen checkpoints)", "checkpoints_true"),
-            plot("PPO checkpoints: learned return, ensemble mean (x: environment step)", "checkpoints_learned"),
-            plot("PPO training episodes: true return (x: environment step)", "ppo_true"),
-            plot("T-REX loss (x: iteration)", "trex_loss"),
-            Panel::Text { title: "Pipeline stages".into(), entity: "pipeline".into() },
-        ],
-    )?;
+    let mut panels = vec![
+        plot("Return against noise level (x: noise level in ‰)", "degradation"),
+        plot("Learned against true return (x: true return; y: predicted return)", "reward"),
+        plot("PPO checkpoints: true return (x: environment step; ◆ chosen checkpoints)", "checkpoints_true"),
+        plot("PPO checkpoints: learned return, ensemble mean (x: environment step)", "checkpoints_learned"),
+        plot("PPO training episodes: true return (x: environment step)", "ppo_true"),
+        plot("T-REX loss (x: iteration)", "trex_loss"),
+        Panel::Text { title: "Pipeline stages".into(), entity: "pipeline".into() },
+    ];
+    if has_clones {
+        panels.push(plot("Multi-BC clones against their sources (x: source's true return; y: clone's, noise-free)", "clones"));
+    }
+    rec.layout(path, panels)?;
     rec.finish(path)
 }

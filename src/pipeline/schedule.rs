@@ -20,7 +20,7 @@ fn work(params: &Params) -> f64 {
         Params::Ppo(p) => p.ppo.total_steps,
         Params::Demonstrator(p) => p.ppo.total_steps,
         Params::Bc(p) => p.bc.iterations,
-        Params::MultiBcRollouts(p) => p.bc.iterations * 3 + p.schedule.len() * p.rollouts_per_level,
+        Params::MultiBcRollouts(p) => p.clone.bc.iterations * 3 + p.schedule.len() * p.rollouts_per_level,
         Params::Trex(p) => p.trex.iterations * p.trex.models,
         Params::NoiseRollouts(p) => p.schedule.len() * p.rollouts_per_level,
         Params::InterpolationRollouts(p) => p.alphas.len() * p.rollouts_per_level,

@@ -9,6 +9,7 @@
 //!   one line per run, coloured by method;
 //! - `final`: the five methods under the three protocols, bars with 95 % bootstrap intervals,
 //!   with the demonstrations' average;
+//! - `clones`: multi-BC's clones against their sources ([`clones`]);
 //! - per (environment, study) with several replicates, `intervals` and `profile`
 //!   ([`studies`]).
 use std::collections::BTreeMap;
@@ -17,6 +18,7 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+mod clones;
 mod studies;
 
 use super::Artifacts;
@@ -419,8 +421,22 @@ fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
     }
 }
 
+/// The uniform-random return a multi-BC stage (by node name) measured.
+fn store_random(store: &Artifacts, node: &str) -> Option<f64> {
+    store.iter().filter(|m| m.node == node).find_map(|m| match Typed::of(m) {
+        Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) => Some(x.random_return),
+        _ => None,
+    })
+}
+
 /// Writes every figure into `dir`; returns what it wrote, for the markdown to link.
-pub fn write(store: &Artifacts, protocols: &[ProtocolRow], aggregate: &[AggregateRow], dir: &Path) -> Result<Vec<Written>> {
+pub fn write(
+    store: &Artifacts,
+    protocols: &[ProtocolRow],
+    aggregate: &[AggregateRow],
+    clone_rows: &[super::clones::CloneRow],
+    dir: &Path,
+) -> Result<Vec<Written>> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
     for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
@@ -497,6 +513,12 @@ pub fn write(store: &Artifacts, protocols: &[ProtocolRow], aggregate: &[Aggregat
             g.runs.sort_by_key(|r| (r.0, r.1));
             let fig = PpoCurves { env: env.clone(), pipeline: pipeline.clone(), runs: std::mem::take(&mut g.runs), demos: g.demos };
             emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "ppo")?;
+        }
+        let rows: Vec<_> = clone_rows.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
+        if !rows.is_empty() {
+            let random = rows.iter().find_map(|r| store_random(store, &r.node));
+            let fig = clones::CloneScatter { env: env.clone(), pipeline: pipeline.clone(), rows, random };
+            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "clones")?;
         }
         let rows: Vec<ProtocolRow> = protocols.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
         if !rows.is_empty() {

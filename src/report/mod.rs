@@ -7,6 +7,7 @@
 //! bootstrap confidence interval over runs.
 use std::collections::BTreeMap;
 
+pub mod clones;
 pub mod figures;
 pub mod studies;
 
@@ -166,7 +167,7 @@ fn protocol_rows(env: &str, table: &Table, method: &str, runs: &[RunEval]) -> Ve
     out
 }
 
-fn pe(e: PolarsError) -> Error {
+pub(crate) fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
 }
 
@@ -349,6 +350,8 @@ pub struct Tables {
     pub aggregate: Vec<studies::AggregateRow>,
     /// Their probabilities of improvement over D-REX and over BC.
     pub improvement: Vec<studies::ImprovementRow>,
+    /// Multi-BC's clones against their sources.
+    pub clones: Vec<clones::CloneRow>,
 }
 
 pub fn build(store: &Artifacts) -> Result<Tables> {
@@ -407,7 +410,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         .sort(["env", "pipeline", "method"], Default::default())
         .collect()
         .map_err(pe)?;
-    Ok(Tables { returns, protocols, runs, demos, accuracy, aggregate, improvement })
+    Ok(Tables { returns, protocols, runs, demos, accuracy, aggregate, improvement, clones: clones::rows(store) })
 }
 
 /// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
@@ -437,12 +440,13 @@ pub fn notes(store: &Artifacts) -> Result<String> {
             if let (true, Some(sm)) = (role.starts_with("set"), store.get(key))
                 && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
             {
-                let kept = x.clones.iter().filter(|c| c.kept).count();
+                let kept = x.kept();
+                let fidelity: Vec<String> = x.clones.iter().map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
                 let mut line = format!(
-                    "{}: the clone filter kept {kept} of {} clones (threshold {:.1} predicted return)",
+                    "{}: the clone filter kept {kept} of {} clones; their fidelity (true return, random 0, source 1) {}",
                     sm.node,
                     x.clones.len(),
-                    x.threshold
+                    fidelity.join(", ")
                 );
                 if kept == 0 {
                     line.push_str("; with none kept, multi-BC's reward saw D-REX's rankings only, so its figures repeat D-REX's");
@@ -561,6 +565,7 @@ pub fn markdown(t: &Tables) -> String {
         ));
     }
     out.push_str(&protocols_markdown(&t.protocols));
+    out.push_str(&clones::markdown(&t.clones));
     out
 }
 

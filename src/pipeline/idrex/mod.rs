@@ -4,12 +4,14 @@
 //! [`interpolation`] (variant 1), [`action_noise`] (variant 2) and [`multi_bc`] (variant 3).
 //! This module holds their rollout stages and the expansion of the iterations into the DAG.
 pub mod action_noise;
+pub mod clone;
 pub mod interpolation;
 pub mod multi_bc;
 
 use super::config::{Method, Pipeline};
 use super::graph::{Graph, io, rl_runs, trex_params};
 use super::stage::{Params, trex::RankedSet};
+use multi_bc::CloneFilter;
 
 /// The three ways iD-REX makes a new ranked set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,6 +43,15 @@ pub struct DrexNodes<'a> {
     pub ppo: &'a [String],
 }
 
+/// Multi-BC's judge trains from the previous reward's seed plus this (and the iteration).
+const JUDGE_SEED_OFFSET: u64 = 0x1d9e_0000;
+
+/// The evaluation node of a PPO run node (`drex/ppo/1` -> `drex/eval/1`).
+fn eval_of(ppo: &str) -> String {
+    let (prefix, run) = ppo.rsplit_once("/ppo/").expect("a PPO node name");
+    format!("{prefix}/eval/{run}")
+}
+
 /// Adds iterations 1..K-1 of `variant` to the graph.
 pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
     let s = &p.spec;
@@ -69,11 +80,31 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                 rollouts_per_level: s.idrex.rollouts_per_level,
             }),
             Variant::MultiBc => {
-                inputs.push(io("reward", &prev_reward));
-                inputs.push(io("baseline", &sets.last().expect("the D-REX set").0));
+                let filter = s.idrex.multi_bc_filter;
+                // Every earlier set, newest last: the filter compares with the newest that
+                // kept rollouts.
+                inputs.extend(sets.iter().enumerate().map(|(i, (n, _))| io(&format!("baseline{i}"), n)));
+                match filter {
+                    CloneFilter::None => {}
+                    CloneFilter::PreviousReward => inputs.push(io("reward", &prev_reward)),
+                    CloneFilter::HeldOutReward => {
+                        let reward = g.get(&prev_reward).expect("the previous reward is in the graph").clone();
+                        // An offset, not a hash: replicate r's seeds stay the replicate's
+                        // shift of replicate 0's ([`crate::pipeline::config::replicate_seed`]).
+                        let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
+                        inputs.push(io("judge", &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
+                    }
+                }
+                if filter != CloneFilter::None {
+                    inputs.push(io("demos", drex.demos));
+                }
+                if s.idrex.multi_bc.source == clone::CloneSource::Checkpoint {
+                    inputs.extend(current.iter().enumerate().map(|(r, n)| io(&format!("eval{r}"), &eval_of(n))));
+                }
                 Params::MultiBcRollouts(multi_bc::Params {
                     env,
-                    bc: s.bc.clone(),
+                    clone: s.idrex.multi_bc.clone(),
+                    filter,
                     schedule: s.idrex.multi_bc_schedule.clone(),
                     rollouts_per_level: s.idrex.multi_bc_rollouts_per_level,
                     device: p.device,
@@ -89,5 +120,97 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
         previous = current;
         current = rl_runs(g, p, m, &prefix, k + 1, &trex, drex.demos);
         prev_reward = trex;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::expand;
+
+    fn graph(extra: &str) -> Graph {
+        let text = format!("version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nmethods: [drex, idrex-multi-bc]\n{extra}");
+        expand(&Pipeline::parse(std::path::Path::new("p.yaml"), &text).unwrap()).unwrap()
+    }
+
+    fn roles(g: &Graph, node: &str) -> Vec<String> {
+        g.get(node).unwrap().inputs.iter().map(|(r, _)| r.clone()).collect()
+    }
+
+    /// Multi-BC's inputs follow its options: every earlier set as a baseline (at K = 3 the
+    /// second iteration sees D-REX's set and the first multi-BC set), the judge (a T-REX
+    /// stage like the previous reward, on its inputs, from another seed) or the previous
+    /// reward or nothing, and the source runs' evaluations for a checkpoint source.
+    #[test]
+    fn multi_bc_inputs_follow_its_options() {
+        let g = graph("iterations: 3\n");
+        let r = roles(&g, "idrex-multi-bc/k2/rollouts");
+        for role in ["policy0", "policy1", "baseline0", "baseline1", "judge", "demos"] {
+            assert!(r.contains(&role.to_string()), "{role} in {r:?}");
+        }
+        assert!(!r.iter().any(|x| x == "reward" || x.starts_with("eval")), "{r:?}");
+        let judge = g.get("idrex-multi-bc/k2/judge").unwrap();
+        let prev = g.get("idrex-multi-bc/k1/trex").unwrap();
+        assert_eq!((&judge.params, &judge.inputs), (&prev.params, &prev.inputs));
+        assert_ne!(judge.seed, prev.seed);
+        assert_eq!(g.get("idrex-multi-bc/k1/judge").unwrap().inputs, g.get("drex/trex").unwrap().inputs);
+
+        let g = graph("idrex:\n  multi_bc_filter: previous-reward\n  multi_bc:\n    source: checkpoint\n");
+        let r = roles(&g, "idrex-multi-bc/k1/rollouts");
+        assert!(r.contains(&"reward".to_string()) && r.contains(&"eval1".to_string()) && !r.contains(&"judge".to_string()), "{r:?}");
+        assert!(g.get("idrex-multi-bc/k1/judge").is_none());
+        let inputs = &g.get("idrex-multi-bc/k1/rollouts").unwrap().inputs;
+        assert!(inputs.contains(&("eval0".to_string(), "drex/eval/0".to_string())), "{inputs:?}");
+
+        let g = graph("idrex:\n  multi_bc_filter: none\n");
+        let r = roles(&g, "idrex-multi-bc/k1/rollouts");
+        assert!(!r.iter().any(|x| x == "reward" || x == "judge" || x == "demos"), "{r:?}");
+    }
+
+    /// A clone option changes multi-BC's rollouts and what depends on them, nothing else.
+    #[test]
+    fn a_clone_option_changes_only_multi_bc() {
+        let (a, b) = (graph("").keys(), graph("idrex:\n  multi_bc:\n    labels: sampled\n").keys());
+        let changed: Vec<&String> = a.keys().filter(|n| a[*n] != b[*n]).collect();
+        assert!(!changed.is_empty());
+        assert!(changed.iter().all(|n| n.starts_with("idrex-multi-bc/") && !n.ends_with("/judge")), "{changed:?}");
+    }
+
+    /// The stage's metrics survive the manifest's JSON, a missing fidelity (NaN) as null.
+    #[test]
+    fn multi_bc_metrics_round_trip_through_json() {
+        use crate::pipeline::stage::{Metrics, StageKind};
+        let fidelity = clone::Fidelity::of(&[], &[], 0.0);
+        assert!(fidelity.normalised.is_nan());
+        let record = clone::CloneRecord {
+            clone: 1,
+            source_step: Some(40_960),
+            fidelity,
+            bc: crate::algo::bc::BcReport {
+                train_steps: 800,
+                val_steps: 1000,
+                train_loss: 0.01,
+                val_loss: 0.02,
+                best_iteration: Some(750),
+                iterations_run: Some(2750),
+            },
+            score: Some(-0.25),
+            kept: false,
+        };
+        let m = Metrics::MultiBcRollouts(multi_bc::Metrics {
+            random_return: -280.5,
+            baseline_set: Some(0),
+            clones: vec![record],
+            degradation: vec![],
+        });
+        let json = m.to_json();
+        assert!(json["clones"][0]["fidelity"]["normalised"].is_null(), "{json}");
+        let back = Metrics::from_json(StageKind::MultiBcRollouts, &json).unwrap();
+        let (Metrics::MultiBcRollouts(a), Metrics::MultiBcRollouts(b)) = (&m, &back) else { panic!() };
+        assert!(b.clones[0].fidelity.normalised.is_nan());
+        assert_eq!(
+            (a.random_return, a.baseline_set, &a.clones[0].bc, a.clones[0].score),
+            (b.random_return, b.baseline_set, &b.clones[0].bc, b.clones[0].score)
+        );
     }
 }

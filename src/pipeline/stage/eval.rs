@@ -94,7 +94,7 @@ pub struct EvalMetrics {
 }
 
 /// Each member's per-step mean and std over a set of trajectories.
-fn member_stats(model: &RewardEnsemble, trajs: &[Trajectory]) -> Vec<(f64, f64)> {
+pub(crate) fn member_stats(model: &RewardEnsemble, trajs: &[Trajectory]) -> Vec<(f64, f64)> {
     let mut sums = vec![(0.0f64, 0.0f64, 0usize); model.nets.len()];
     for t in trajs {
         for (s, r) in sums.iter_mut().zip(model.raw(t.next_obs(), &t.actions)) {

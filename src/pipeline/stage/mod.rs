@@ -9,17 +9,17 @@
 //!
 //! | kind | version | inputs | outputs | file |
 //! |---|---|---|---|---|
-//! | demonstrator | 1 | - | policy/ | demos.rs |
+//! | demonstrator | 2 | - | policy/ | demos.rs |
 //! | demos | 1 | policy | rollouts.mcap | demos.rs |
 //! | demos-import | 1 | - (a file) | rollouts.mcap | demos.rs |
-//! | bc | 1 | demos | policy/ | bc.rs |
+//! | bc | 3 | demos | policy/ | bc.rs |
 //! | noise-rollouts | 1 | policy | rollouts.mcap | noise.rs |
-//! | trex | 1 | set0..setN, demos | reward/ | trex.rs |
-//! | ppo | 1 | reward | policy/, curve.csv | ppo.rs |
-//! | eval | 1 | policy, reward?, demos | rollouts.mcap | eval.rs |
+//! | trex | 3 | set0..setN, demos | reward/ | trex.rs |
+//! | ppo | 2 | reward | policy/, curve.csv | ppo.rs |
+//! | eval | 2 | policy, reward?, demos | rollouts.mcap | eval.rs |
 //! | interpolation-rollouts | 1 | policy<r>, older<r> | rollouts.mcap | idrex/interpolation.rs |
 //! | action-noise-rollouts | 1 | policy<r> | rollouts.mcap | idrex/action_noise.rs |
-//! | multi-bc-rollouts | 1 | policy<r>, reward, baseline | rollouts.mcap | idrex/multi_bc.rs |
+//! | multi-bc-rollouts | 4 | policy<r>, baseline<i>, reward or judge, demos, eval<r> | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
 pub mod bc;
 pub mod demos;
 pub mod eval;
@@ -161,7 +161,10 @@ impl StageKind {
             // 2: trained on nn::dense (explicit gradients over MKL's sgemm) instead of
             // libtorch's autograd, which sums in another order. 3: idrex's own products
             // (nn::gemm) and initial weights (nn::init), the same bits on every processor.
-            StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts => 3,
+            StageKind::Bc | StageKind::Trex => 3,
+            // 4: clones from deterministic, mean-labelled source episodes with early
+            // stopping, fidelity measured, and a per-step filter.
+            StageKind::MultiBcRollouts => 4,
             // 2: the networks' initial weights (PPO) and the learned reward's inference
             // (PPO, evaluation) from idrex's own code instead of libtorch's.
             StageKind::Demonstrator | StageKind::Ppo | StageKind::Eval => 2,

@@ -1,0 +1,251 @@
+//! One multi-BC clone: episodes of a source policy, behavioural cloning on them, and how
+//! true the clone is to its source (its [`Fidelity`], measured on the ground truth for the
+//! reader; nothing decides on it).
+use std::path::Path;
+
+use crate::algo::bc::{self, BcConfig, BcReport, EarlyStopping};
+use crate::algo::ppo;
+use crate::data::{TrajMeta, Trajectory};
+use crate::env::{Env, EnvId};
+use crate::error::{Error, Result};
+use crate::nn::{ActorCritic, Device, WeightInit};
+use crate::pipeline::stage::load_policy_for;
+use crate::rollout::{self, Actor, PolicyActor, UniformActor};
+use crate::seed::{self, Purpose};
+use crate::stats::nan_as_null;
+
+/// Which policy of each source run a clone imitates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CloneSource {
+    /// The policy at the end of training.
+    #[default]
+    Final,
+    /// The checkpoint the ground-truth-free protocol chooses (the highest pessimistic
+    /// learned return, pooled over the runs). The original code cloned a checkpoint chosen
+    /// by hand.
+    Checkpoint,
+}
+
+/// How the source acts in the episodes a clone learns from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SourceActing {
+    /// Sampling from its Gaussian, as PPO policies are evaluated (and as the original did).
+    Stochastic,
+    /// With its mean action.
+    #[default]
+    Deterministic,
+}
+
+/// What the clone regresses at each of the source's states.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CloneLabels {
+    /// The actions the source took (sampled, clipped to the box; the original code).
+    Sampled,
+    /// The source's mean action, clipped to the box: what the noise-free clone should do.
+    #[default]
+    Mean,
+}
+
+/// How multi-BC's clones are made (`idrex.multi_bc` in a pipeline file).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CloneConfig {
+    pub source: CloneSource,
+    pub acting: SourceActing,
+    pub labels: CloneLabels,
+    /// Episodes of the source a clone trains on (the report: one trajectory).
+    pub episodes: usize,
+    /// Further source episodes held out for BC's validation loss and early stopping; 0
+    /// validates on `bc.val_fraction` of the training steps instead.
+    pub held_out_episodes: usize,
+    /// Feed the clone observations normalised with its source's statistics (and store them
+    /// with it), as the source saw them.
+    pub normalize: bool,
+    /// The clones' BC settings (separate from the demonstrations' `bc`).
+    pub bc: BcConfig,
+    /// Noise-free episodes of each clone, measured for fidelity and scored by the filter.
+    pub fidelity_episodes: usize,
+}
+
+impl Default for CloneConfig {
+    fn default() -> Self {
+        CloneConfig {
+            source: CloneSource::Final,
+            acting: SourceActing::Deterministic,
+            labels: CloneLabels::Mean,
+            episodes: 1,
+            held_out_episodes: 1,
+            normalize: true,
+            bc: BcConfig {
+                iterations: 20_000,
+                init: WeightInit::Normal002,
+                early_stopping: Some(EarlyStopping { every: 250, patience: 8 }),
+                ..BcConfig::default()
+            },
+            fidelity_episodes: 5,
+        }
+    }
+}
+
+impl CloneConfig {
+    /// Source episodes per clone, training and held out: their seeds are 100 apart per clone.
+    pub const MAX_EPISODES: usize = 100;
+
+    pub fn check(&self) -> std::result::Result<(), String> {
+        if self.episodes == 0 {
+            return Err("idrex.multi_bc.episodes is 0; a clone needs at least 1 source episode".into());
+        }
+        if self.episodes + self.held_out_episodes > Self::MAX_EPISODES {
+            return Err(format!("idrex.multi_bc.episodes + held_out_episodes is over {}; use fewer", Self::MAX_EPISODES));
+        }
+        if self.fidelity_episodes == 0 {
+            return Err("idrex.multi_bc.fidelity_episodes is 0; measure each clone on at least 1 episode".into());
+        }
+        Ok(())
+    }
+}
+
+/// How true a clone is to its source, on the ground truth (recorded for the reader only).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Fidelity {
+    pub source_lengths: Vec<usize>,
+    pub source_returns: Vec<f64>,
+    /// The clone's noise-free episodes.
+    pub clone_lengths: Vec<usize>,
+    pub clone_returns: Vec<f64>,
+    /// (clone - random) / (source - random) of the mean returns: 1 is as good as the source,
+    /// 0 as the uniform-random policy. Null where the source is within 100 of random.
+    #[serde(with = "nan_as_null")]
+    pub normalised: f64,
+    /// The clone's mean episode length over the source's.
+    pub length_ratio: f64,
+}
+
+impl Fidelity {
+    /// A source at least this far above random has a normalised fidelity.
+    pub const MIN_SOURCE_ABOVE_RANDOM: f64 = 100.0;
+
+    pub fn of(source: &[Trajectory], clone: &[Trajectory], random_return: f64) -> Fidelity {
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let (source_returns, clone_returns): (Vec<f64>, Vec<f64>) =
+            (source.iter().map(Trajectory::ret).collect(), clone.iter().map(Trajectory::ret).collect());
+        let (source_lengths, clone_lengths): (Vec<usize>, Vec<usize>) =
+            (source.iter().map(Trajectory::len).collect(), clone.iter().map(Trajectory::len).collect());
+        let gap = mean(&source_returns) - random_return;
+        let normalised = if gap >= Self::MIN_SOURCE_ABOVE_RANDOM { (mean(&clone_returns) - random_return) / gap } else { f64::NAN };
+        let lengths = |v: &[usize]| mean(&v.iter().map(|&l| l as f64).collect::<Vec<_>>());
+        let length_ratio = lengths(&clone_lengths) / lengths(&source_lengths).max(1.0);
+        Fidelity { source_lengths, source_returns, clone_lengths, clone_returns, normalised, length_ratio }
+    }
+}
+
+/// One clone's record in the stage's metrics.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CloneRecord {
+    pub clone: usize,
+    /// The source checkpoint's PPO step; None for the final policy.
+    pub source_step: Option<usize>,
+    pub fidelity: Fidelity,
+    pub bc: BcReport,
+    /// The filter's per-step score against the baseline (None without a filter).
+    pub score: Option<f64>,
+    pub kept: bool,
+}
+
+/// A trained clone with the episodes it came from and was measured on.
+pub struct Made {
+    pub policy: ActorCritic,
+    pub source_episodes: Vec<Trajectory>,
+    pub fidelity_episodes: Vec<Trajectory>,
+    pub report: BcReport,
+    pub source_step: Option<usize>,
+}
+
+/// The mean true return of the uniform-random policy over `episodes` episodes.
+pub fn random_return(env: &mut Env, episodes: usize, seed: u64) -> f64 {
+    let mut actor = UniformActor::of(env);
+    let ts = rollout::episodes(env, &mut actor, episodes, seed, Purpose::RandomBaseline, &TrajMeta::default());
+    ts.iter().map(Trajectory::ret).sum::<f64>() / ts.len().max(1) as f64
+}
+
+/// The source policy in a PPO run's directory: its final policy, or the checkpoint at `step`.
+fn source_policy(dir: &Path, step: Option<usize>, env: &Env, id: EnvId) -> Result<ActorCritic> {
+    let Some(step) = step else { return load_policy_for(dir, env, id) };
+    let found = ppo::checkpoints(dir)?.into_iter().find(|(s, _)| *s == step);
+    let (_, at) = found.ok_or_else(|| Error::file(dir, format!("no checkpoint at step {step}")))?;
+    let p = ActorCritic::load(&at)?;
+    p.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
+    Ok(p)
+}
+
+/// `t` with every action replaced by `policy`'s mean action at that state, clipped to the box.
+fn mean_labelled(t: &Trajectory, policy: &ActorCritic, env: &Env) -> Trajectory {
+    let mut actor = PolicyActor::mean_of(policy);
+    let (low, high) = env.action_bounds();
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
+    let mut out = t.clone();
+    for s in 0..t.len() {
+        let a = &mut out.actions[s * t.act_dim..(s + 1) * t.act_dim];
+        actor.act(t.obs_row(s), &mut rng, a);
+        for (i, x) in a.iter_mut().enumerate() {
+            *x = (*x as f64).clamp(low[i], high[i]) as f32;
+        }
+    }
+    out
+}
+
+/// `t`'s observations as `policy`'s networks see them.
+fn normalised(t: &Trajectory, policy: &ActorCritic) -> Trajectory {
+    let cpu = policy.to_cpu();
+    let mut out = t.clone();
+    for (row, raw) in out.obs.chunks_exact_mut(t.obs_dim).zip(t.obs.chunks_exact(t.obs_dim)) {
+        cpu.normalize(raw, row);
+    }
+    out
+}
+
+/// Clone `r` of the run in `dir` (the stage seed `seed`).
+#[allow(clippy::too_many_arguments)]
+pub fn make(
+    env: &mut Env,
+    dir: &Path,
+    step: Option<usize>,
+    cfg: &CloneConfig,
+    id: EnvId,
+    seed: u64,
+    r: usize,
+    threads: usize,
+    device: Device,
+) -> Result<Made> {
+    let source = source_policy(dir, step, env, id)?;
+    let stochastic = cfg.acting == SourceActing::Stochastic;
+    let mut actor = PolicyActor::new(source.to_cpu(), stochastic);
+    let meta = TrajMeta { source: format!("multi-bc/{r}/source"), group: r, ..Default::default() };
+    let first = (r * CloneConfig::MAX_EPISODES) as u64;
+    let source_episodes: Vec<Trajectory> = (0..(cfg.episodes + cfg.held_out_episodes) as u64)
+        .map(|k| rollout::episode(env, &mut actor, seed::derive(seed, Purpose::CloneDemo, first + k), meta.clone()))
+        .collect();
+    let labelled: Vec<Trajectory> = source_episodes
+        .iter()
+        .map(|t| {
+            let t = if cfg.labels == CloneLabels::Mean { mean_labelled(t, &source, env) } else { t.clone() };
+            if cfg.normalize { normalised(&t, &source) } else { t }
+        })
+        .collect();
+    let (train, held_out) = labelled.split_at(cfg.episodes);
+    let held_out = (!held_out.is_empty()).then_some(held_out);
+    let (mut policy, report) =
+        bc::train_validated(train, held_out, &cfg.bc, seed::derive(seed, Purpose::CloneTraining, r as u64), threads, device)?;
+    if cfg.normalize {
+        policy.obs_norm = source.obs_norm.clone();
+        policy.obs_clip = source.obs_clip;
+    }
+    let meta = TrajMeta { source: format!("multi-bc/{r}/clone"), group: r, ..Default::default() };
+    let mut clone_actor = PolicyActor::mean_of(&policy);
+    let fidelity_seed = seed::derive(seed, Purpose::CloneFidelity, r as u64);
+    let fidelity_episodes = rollout::episodes(env, &mut clone_actor, cfg.fidelity_episodes, fidelity_seed, Purpose::Episode, &meta);
+    Ok(Made { policy, source_episodes, fidelity_episodes, report, source_step: step })
+}
