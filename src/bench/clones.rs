@@ -49,9 +49,9 @@ pub enum Lever {
     Deterministic,
     /// + N(0, 0.02^2) weights and zero biases (the original code's BC).
     NormalInit,
-    /// + observations normalised with the source's statistics: today's default.
+    /// + observations normalised with the source's statistics.
     Normalize,
-    /// The default with 4 source episodes instead of 1.
+    /// + 4 source episodes instead of 1: today's default.
     FourEpisodes,
     /// The default, cloning the checkpoint the ground-truth-free protocol picks.
     Checkpoint,
@@ -91,9 +91,9 @@ impl Lever {
             Lever::EarlyStopping => stopping,
             Lever::MeanLabels => CloneConfig { labels: CloneLabels::Mean, ..stopping },
             Lever::Deterministic => CloneConfig { labels: CloneLabels::Mean, acting: SourceActing::Deterministic, ..stopping },
-            Lever::NormalInit => CloneConfig { normalize: false, ..default },
-            Lever::Normalize => default,
-            Lever::FourEpisodes => CloneConfig { episodes: 4, ..default },
+            Lever::NormalInit => CloneConfig { normalize: false, episodes: 1, ..default },
+            Lever::Normalize => CloneConfig { episodes: 1, ..default },
+            Lever::FourEpisodes => default,
             Lever::Checkpoint => CloneConfig { source: CloneSource::Checkpoint, ..default },
         }
     }
@@ -173,7 +173,15 @@ pub fn clones_bench(args: &ClonesBenchArgs) -> anyhow::Result<()> {
                 let row = Row {
                     group: group.clone(),
                     lever,
-                    record: clone::CloneRecord { clone: r, source_step: step, fidelity, bc: made.report, score: None, kept: true },
+                    record: clone::CloneRecord {
+                        clone: r,
+                        source_step: step,
+                        fidelity,
+                        bc: made.report,
+                        score: None,
+                        previous_reward_score: None,
+                        kept: true,
+                    },
                     seconds,
                 };
                 if let Some(f) = out.as_mut() {

@@ -76,7 +76,7 @@ impl Default for CloneConfig {
             source: CloneSource::Final,
             acting: SourceActing::Deterministic,
             labels: CloneLabels::Mean,
-            episodes: 1,
+            episodes: 4,
             held_out_episodes: 1,
             normalize: true,
             bc: BcConfig {
@@ -152,6 +152,10 @@ pub struct CloneRecord {
     pub bc: BcReport,
     /// The filter's per-step score against the baseline (None without a filter).
     pub score: Option<f64>,
+    /// The same score under the previous iteration's reward, whichever filter ran: what the
+    /// `previous-reward` filter would have decided on (for comparing the rules).
+    #[serde(default)]
+    pub previous_reward_score: Option<f64>,
     pub kept: bool,
 }
 

@@ -84,19 +84,16 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                 // Every earlier set, newest last: the filter compares with the newest that
                 // kept rollouts.
                 inputs.extend(sets.iter().enumerate().map(|(i, (n, _))| io(&format!("baseline{i}"), n)));
-                match filter {
-                    CloneFilter::None => {}
-                    CloneFilter::PreviousReward => inputs.push(io("reward", &prev_reward)),
-                    CloneFilter::HeldOutReward => {
-                        let reward = g.get(&prev_reward).expect("the previous reward is in the graph").clone();
-                        // An offset, not a hash: replicate r's seeds stay the replicate's
-                        // shift of replicate 0's ([`crate::pipeline::config::replicate_seed`]).
-                        let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
-                        inputs.push(io("judge", &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
-                    }
-                }
-                if filter != CloneFilter::None {
-                    inputs.push(io("demos", drex.demos));
+                // The previous reward and the demonstrations always: the stage records what the
+                // previous-reward filter would decide, whichever filter runs.
+                inputs.push(io("reward", &prev_reward));
+                inputs.push(io("demos", drex.demos));
+                if filter == CloneFilter::HeldOutReward {
+                    let reward = g.get(&prev_reward).expect("the previous reward is in the graph").clone();
+                    // An offset, not a hash: replicate r's seeds stay the replicate's shift of
+                    // replicate 0's ([`crate::pipeline::config::replicate_seed`]).
+                    let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
+                    inputs.push(io("judge", &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
                 }
                 if s.idrex.multi_bc.source == clone::CloneSource::Checkpoint {
                     inputs.extend(current.iter().enumerate().map(|(r, n)| io(&format!("eval{r}"), &eval_of(n))));
@@ -148,7 +145,7 @@ mod tests {
         for role in ["policy0", "policy1", "baseline0", "baseline1", "judge", "demos"] {
             assert!(r.contains(&role.to_string()), "{role} in {r:?}");
         }
-        assert!(!r.iter().any(|x| x == "reward" || x.starts_with("eval")), "{r:?}");
+        assert!(r.contains(&"reward".to_string()) && !r.iter().any(|x| x.starts_with("eval")), "{r:?}");
         let judge = g.get("idrex-multi-bc/k2/judge").unwrap();
         let prev = g.get("idrex-multi-bc/k1/trex").unwrap();
         assert_eq!((&judge.params, &judge.inputs), (&prev.params, &prev.inputs));
@@ -164,7 +161,7 @@ mod tests {
 
         let g = graph("idrex:\n  multi_bc_filter: none\n");
         let r = roles(&g, "idrex-multi-bc/k1/rollouts");
-        assert!(!r.iter().any(|x| x == "reward" || x == "judge" || x == "demos"), "{r:?}");
+        assert!(!r.iter().any(|x| x == "judge"), "{r:?}");
     }
 
     /// A clone option changes multi-BC's rollouts and what depends on them, nothing else.
@@ -195,6 +192,7 @@ mod tests {
                 iterations_run: Some(2750),
             },
             score: Some(-0.25),
+            previous_reward_score: Some(0.5),
             kept: false,
         };
         let m = Metrics::MultiBcRollouts(multi_bc::Metrics {

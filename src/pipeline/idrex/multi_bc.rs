@@ -120,9 +120,9 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
 
 pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     let mut env = Env::new(p.env)?;
+    let previous = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
     let judge = match p.filter {
-        CloneFilter::None => None,
-        CloneFilter::PreviousReward => Some(RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?),
+        CloneFilter::None | CloneFilter::PreviousReward => None,
         CloneFilter::HeldOutReward => Some(RewardEnsemble::load(&ctx.input("judge")?.join(REWARD))?),
     };
     // The newest earlier set with rollouts (an earlier multi-BC set may have kept none).
@@ -133,10 +133,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
             baseline = Some((i, least_noisy(&set)));
         }
     }
-    let demos = match judge {
-        Some(_) => read_rollouts(ctx.input("demos")?)?,
-        None => Vec::new(),
-    };
+    let demos = read_rollouts(ctx.input("demos")?)?;
     let source_step = match p.clone.source {
         clone::CloneSource::Final => None,
         clone::CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered("eval"))?),
@@ -149,9 +146,13 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r as u64);
         let trajs = rollout::epsilon_greedy(&mut env, &made.policy, &p.schedule, p.rollouts_per_level, seed, &meta);
-        let score = match (&judge, &baseline) {
-            (Some(reward), Some((_, base))) => Some(per_step_score(reward, &demos, &made.fidelity_episodes, base)),
-            _ => None,
+        let score_under =
+            |reward: &RewardEnsemble| baseline.as_ref().map(|(_, base)| per_step_score(reward, &demos, &made.fidelity_episodes, base));
+        let previous_reward_score = score_under(&previous);
+        let score = match p.filter {
+            CloneFilter::None => None,
+            CloneFilter::PreviousReward => previous_reward_score,
+            CloneFilter::HeldOutReward => judge.as_ref().and_then(score_under),
         };
         let keep = score.is_none_or(|s| s >= 0.0);
         clones.push(CloneRecord {
@@ -160,6 +161,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
             source_step: made.source_step,
             bc: made.report,
             score,
+            previous_reward_score,
             kept: keep,
         });
         extra.extend(made.source_episodes);
@@ -168,7 +170,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     }
     ctx.write_rollouts(p.env, &kept, None)?;
     crate::log::mcap::write(&ctx.out.join(CLONES), p.env.name(), env.dt(), &extra, None)?;
-    let baseline_set = baseline.filter(|_| judge.is_some()).map(|(i, _)| i);
+    let baseline_set = baseline.filter(|_| p.filter != CloneFilter::None).map(|(i, _)| i);
     Ok(Metrics { random_return, baseline_set, clones, degradation: degradation(&kept) })
 }
 
