@@ -51,29 +51,13 @@ fn smoke_pipeline_end_to_end() {
     let v = Command::new(&rerun).args(["rrd", "verify", rec.to_str().unwrap()]).output().unwrap();
     assert!(v.status.success(), "rerun rrd verify: {}{}", stdout(&v), stderr(&v));
     // It carries its layout (a blueprint: a viewport with automatic views off and one view
-    // per figure), and every plotted row has the one plot timeline, `x`, and no other.
+    // per figure, each on its own x axis over the whole timeline, legends giving way where a
+    // view has many series), and every plotted row has the one plot timeline, `x`.
     let p = Command::new(&rerun).args(["rrd", "print", "-vv", rec.to_str().unwrap()]).output().unwrap();
-    assert!(p.status.success(), "rerun rrd print: {}", stderr(&p));
-    let printed = stdout(&p);
-    let (mut entity, mut views, mut timelines) = (String::new(), std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
-    let blueprint = |e: &str| {
-        ["/view/", "/container/", "/viewport", "/time_panel", "/blueprint_panel", "/selection_panel"].iter().any(|p| e.starts_with(p))
-    };
-    for line in printed.lines() {
-        if let Some(rest) = line.strip_prefix("Chunk(") {
-            entity = rest.split(" - ").nth(1).unwrap_or_default().trim().to_string();
-            if entity.starts_with("/view/") && !entity.contains("/ViewContents") {
-                views.insert(entity.clone());
-            }
-        } else if let Some(i) = line.find("index_name: ")
-            && !blueprint(&entity)
-        {
-            timelines.insert(line[i + 12..].split_whitespace().next().unwrap_or_default().to_string());
-        }
-    }
-    assert!(printed.contains("ViewportBlueprint:auto_views"), "the recording has no blueprint");
-    assert_eq!(views.len(), 8, "one view per figure (multi-BC's clones among them): {views:?}");
-    assert_eq!(timelines.into_iter().collect::<Vec<_>>(), vec!["x".to_string()], "plotted rows carry only the plot timeline");
+    assert!(stdout(&p).contains("ViewportBlueprint:auto_views"), "the recording has no blueprint");
+    let views = crate::recording::check_layout(&rec, |t| !t.contains("legend hidden"));
+    assert_eq!(views.len(), 7, "one plot view per figure (multi-BC's clones among them): {views:?}");
+    assert!(views.iter().any(|v| v.contains("Multi-BC clones")), "{views:?}");
 
     // Every rollout file opens in Python's mcap reader with monotonic log times.
     let mcaps: Vec<_> = walk(&store).into_iter().filter(|p| p.extension().is_some_and(|e| e == "mcap")).collect();
@@ -576,13 +560,23 @@ fn a_study_split_over_two_files_reports_its_replicates() {
         path
     };
     let run = |path: &Path| {
-        let rec = dir.join("r.rrd");
+        let rec = path.with_extension("rrd");
         idrex(&["pipeline", "run", path.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()])
     };
     for f in [file("a.yaml", "replicates: 2", "[0, 1]"), file("b.yaml", "first_replicate: 2", "[0, 1]")] {
         let out = run(&f);
         assert!(out.status.success(), "{}", stderr(&out));
     }
+    // The recording of a file with two replicates has a view of each replicate's final
+    // returns, one series (a point per replicate) per method; its layout holds like any
+    // recording's. The second file holds one replicate: no such view.
+    let views = crate::recording::check_layout(&dir.join("a.rrd"), |t| !t.contains("legend hidden"));
+    assert!(views.iter().any(|v| v.contains("Each replicate's final policy")), "{views:?}");
+    let single = crate::recording::check_layout(&dir.join("b.rrd"), |t| !t.contains("legend hidden"));
+    assert!(!single.iter().any(|v| v.contains("Each replicate's")), "{single:?}");
+    let printed = crate::recording::printed(&dir.join("a.rrd"));
+    let methods: Vec<&String> = printed.keys().filter(|e| e.starts_with("/replicates/")).collect();
+    assert_eq!(methods.len(), 5, "{methods:?}");
     let report = dir.join("report");
     let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", report.to_str().unwrap()]);
     assert!(rep.status.success(), "{}", stderr(&rep));

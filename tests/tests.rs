@@ -5,4 +5,5 @@ mod bootstrap;
 mod env_cli;
 mod env_equivalence;
 mod pipeline;
+mod recording;
 mod reliability;

@@ -2,29 +2,49 @@
 //! sent with the recording: one titled panel per figure, nothing automatic.
 //!
 //! Every plot is a time series view over one shared sequence timeline, [`X`]: a view's own
-//! x quantity (noise level in ‰, PPO step, true return, T-REX iteration) is logged on it, and
-//! the view's title says which. Rerun plots every view against the one timeline selected in
-//! the time panel, so separate timelines per quantity would leave all but one view empty.
-//! Each row carries only that timeline (the time is reset before every row, and Rerun's
-//! automatic `log_time` and `log_tick` are off), so no row inherits another plot's x.
+//! x quantity (noise level in ‰, PPO step, true return, T-REX iteration, replicate) is logged
+//! on it, and the view's title says which. Rerun plots every view against the one timeline
+//! selected in the time panel, so separate timelines per quantity would leave all but one
+//! view empty. Each row carries only that timeline (the time is reset before every row, and
+//! Rerun's automatic `log_time` and `log_tick` are off), so no row inherits another plot's x.
+//!
+//! So that every view shows all of its data on opening, whatever the sign and range of its x,
+//! each view's blueprint sets (a) its visible time range on [`X`] to the whole timeline and
+//! (b) its x axis independent of the other views': by default Rerun links all time series
+//! views' x axes to one global range, so one panel's range (true returns around -1,000)
+//! became every panel's, and views whose x is environment steps showed nothing. The Rust
+//! SDK's view builders cannot set view properties, so the blueprint is written here from
+//! Rerun's blueprint archetypes, as the SDK's builder writes it.
+//!
+//! Legends: a view with at most [`LEGEND_MAX`] series shows its legend in the top-left
+//! corner; with more (15 runs and up) the legend is hidden, the title says so, and the
+//! series of one method share its colour (hovering a point names its series).
 //!
 //! The stream is recorded in memory and written by us: Rerun's own file sink stops on an I/O
 //! error (a full disk) and its flush then waits forever.
+use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::path::Path;
 
-use rerun::blueprint::components::PanelState;
-use rerun::blueprint::{
-    Blueprint, BlueprintActivation, BlueprintPanel, ContainerLike, Grid, SelectionPanel, TextDocumentView, TimePanel, TimeSeriesView,
+use rerun::blueprint::components::{
+    ContainerKind, Corner2D, IncludedContent, LinkAxis, PanelState, QueryExpression, RootContainer, ViewClass,
 };
+use rerun::external::re_log_types::{BlueprintActivationCommand, RecordingId};
+use rerun::external::re_sdk_types::blueprint::archetypes as bp;
 
 use crate::error::{Error, Result};
 
 /// The one plot timeline.
 pub const X: &str = "x";
 
+/// The most series a view shows a legend for.
+pub const LEGEND_MAX: usize = 8;
+
 pub struct Recording {
     rec: rerun::RecordingStream,
     storage: rerun::sink::MemorySinkStorage,
+    /// Series named per top-level entity (a view's root), for the legend policy.
+    series: RefCell<BTreeMap<String, usize>>,
 }
 
 fn err(path: &Path, e: impl std::fmt::Display) -> Error {
@@ -41,8 +61,8 @@ pub enum Style {
 
 /// One panel of the layout.
 pub enum Panel {
-    /// A plot of the entities matching `contents` (Rerun query expressions), titled.
-    Plot { title: String, contents: Vec<String> },
+    /// A plot of the entities under `/<root>/`, titled.
+    Plot { title: String, root: String },
     /// A markdown document logged at `entity`.
     Text { title: String, entity: String },
 }
@@ -53,21 +73,42 @@ impl Recording {
             rerun::RecordingStreamBuilder::new("idrex").recording_name(name.to_string()).memory().map_err(|e| err(path, e))?;
         rec.set_log_time_enabled(false);
         rec.set_log_tick_enabled(false);
-        Ok(Recording { rec, storage })
+        Ok(Recording { rec, storage, series: RefCell::new(BTreeMap::new()) })
     }
 
     /// Names a series and how it is drawn (its legend entry).
     pub fn series(&self, entity: &str, name: &str, style: Style) {
+        self.series_in(entity, name, style, None);
+    }
+
+    /// A series drawn in `colour` (RGB), as the other series of its group (a method's runs).
+    pub fn series_coloured(&self, entity: &str, name: &str, style: Style, colour: [u8; 3]) {
+        self.series_in(entity, name, style, Some(colour));
+    }
+
+    fn series_in(&self, entity: &str, name: &str, style: Style, colour: Option<[u8; 3]>) {
+        let root = entity.trim_start_matches('/').split('/').next().unwrap_or_default().to_string();
+        *self.series.borrow_mut().entry(root).or_default() += 1;
+        let colours = colour.map(|[r, g, b]| rerun::components::Color::from_rgb(r, g, b));
         let _ = match style {
-            Style::Line => self.rec.log_static(entity, &rerun::SeriesLines::new().with_names([name]).with_widths([2.0])),
-            Style::ThinLine => self.rec.log_static(entity, &rerun::SeriesLines::new().with_names([name]).with_widths([0.75])),
-            Style::Points => self.rec.log_static(
-                entity,
-                &rerun::SeriesPoints::new()
+            Style::Line | Style::ThinLine => {
+                let width = if style == Style::Line { 2.0 } else { 0.75 };
+                let mut lines = rerun::SeriesLines::new().with_names([name]).with_widths([width]);
+                if let Some(c) = colours {
+                    lines = lines.with_colors([c]);
+                }
+                self.rec.log_static(entity, &lines)
+            }
+            Style::Points => {
+                let mut points = rerun::SeriesPoints::new()
                     .with_names([name])
                     .with_markers([rerun::components::MarkerShape::Circle])
-                    .with_marker_sizes([3.0]),
-            ),
+                    .with_marker_sizes([3.0]);
+                if let Some(c) = colours {
+                    points = points.with_colors([c]);
+                }
+                self.rec.log_static(entity, &points)
+            }
         };
     }
 
@@ -93,23 +134,67 @@ impl Recording {
     }
 
     /// Sends the layout: the panels in a grid, automatic views off, the plot timeline
-    /// selected, the side and time panels collapsed so that the plots have the window.
+    /// selected, the side and time panels collapsed so that the plots have the window; each
+    /// plot on the whole timeline with its own x axis, its legend by [`LEGEND_MAX`].
     pub fn layout(&self, path: &Path, panels: Vec<Panel>) -> Result<()> {
-        let views: Vec<ContainerLike> = panels
-            .into_iter()
-            .map(|p| match p {
-                Panel::Plot { title, contents } => TimeSeriesView::new(title).with_contents(contents).into(),
-                Panel::Text { title, entity } => TextDocumentView::new(title).with_origin(entity.as_str()).into(),
-            })
-            .collect();
-        Blueprint::new(Grid::new(views))
-            .with_auto_views(false)
+        let app = self.rec.store_info().map(|i| i.application_id().clone()).unwrap_or_else(|| "idrex".into());
+        let (stream, storage) =
+            rerun::RecordingStreamBuilder::new(app).recording_id(RecordingId::random()).blueprint().memory().map_err(|e| err(path, e))?;
+        // What the viewer identifies blueprint data by; no wall-clock time in the layout.
+        stream.set_log_time_enabled(false);
+        stream.set_time_sequence("blueprint", 0);
+        let counts = self.series.borrow();
+        let mut children = Vec::new();
+        // Fixed ids (views 1, 2, ...; the grid 0): the layout is the same in every recording.
+        let id = |i: usize| uuid::Uuid::from_u128(0x1d4e_0000_0000_4000_8000_0000_0000_0000 | i as u128);
+        for (i, panel) in panels.into_iter().enumerate() {
+            let view = format!("view/{}", id(i + 1));
+            let (class, title, origin, query) = match panel {
+                Panel::Plot { title, root } => {
+                    let n = counts.get(&root).copied().unwrap_or(0);
+                    let title = if n > LEGEND_MAX { format!("{n} series, legend hidden (hover a point): {title}") } else { title };
+                    let (legend_visible, corner) = (n <= LEGEND_MAX, Corner2D::LeftTop);
+                    stream
+                        .log(format!("{view}/TimeAxis"), &bp::TimeAxis::new().with_link(LinkAxis::Independent))
+                        .map_err(|e| err(path, e))?;
+                    let whole = rerun::datatypes::VisibleTimeRange { timeline: X.into(), range: rerun::datatypes::TimeRange::EVERYTHING };
+                    stream.log(format!("{view}/VisibleTimeRanges"), &bp::VisibleTimeRanges::new([whole])).map_err(|e| err(path, e))?;
+                    stream
+                        .log(format!("{view}/PlotLegend"), &bp::PlotLegend::new().with_corner(corner).with_visible(legend_visible))
+                        .map_err(|e| err(path, e))?;
+                    ("TimeSeries", title, "/".to_string(), format!("+ /{root}/**"))
+                }
+                Panel::Text { title, entity } => ("TextDocument", title, format!("/{entity}"), "$origin/**".to_string()),
+            };
+            stream
+                .log(format!("{view}/ViewContents"), &bp::ViewContents::new([QueryExpression(query.into())]))
+                .map_err(|e| err(path, e))?;
+            let arch = bp::ViewBlueprint::new(ViewClass(class.into())).with_display_name(title).with_space_origin(origin);
+            stream.log(view.as_str(), &arch).map_err(|e| err(path, e))?;
+            children.push(IncludedContent(view.into()));
+        }
+        let container = id(0);
+        let grid = bp::ContainerBlueprint::new(ContainerKind::Grid).with_contents(children);
+        stream.log(format!("container/{container}"), &grid).map_err(|e| err(path, e))?;
+        let viewport = bp::ViewportBlueprint::new()
+            .with_root_container(RootContainer(container.into()))
             .with_auto_layout(false)
-            .with_time_panel(TimePanel::new().with_timeline(X).with_state(PanelState::Collapsed))
-            .with_blueprint_panel(BlueprintPanel::new().with_state(PanelState::Collapsed))
-            .with_selection_panel(SelectionPanel::new().with_state(PanelState::Collapsed))
-            .send(&self.rec, BlueprintActivation::default())
-            .map_err(|e| err(path, e))
+            .with_auto_views(false);
+        stream.log("viewport", &viewport).map_err(|e| err(path, e))?;
+        for panel in ["blueprint_panel", "selection_panel"] {
+            stream.log(panel, &bp::PanelBlueprint::new().with_state(PanelState::Collapsed)).map_err(|e| err(path, e))?;
+        }
+        stream
+            .log("time_panel", &bp::TimePanelBlueprint::new().with_timeline(X).with_state(PanelState::Collapsed))
+            .map_err(|e| err(path, e))?;
+        let msgs = storage.take();
+        let blueprint_id = match msgs.first() {
+            Some(rerun::log::LogMsg::SetStoreInfo(info)) => info.info.store_id.clone(),
+            _ => return Err(err(path, "the blueprint stream did not start with its store info")),
+        };
+        let activation = BlueprintActivationCommand { blueprint_id, make_active: true, make_default: true };
+        self.rec.send_blueprint(msgs, activation);
+        Ok(())
     }
 
     /// Encodes the recording and writes it to `path` (fsynced).

@@ -51,6 +51,22 @@ impl Method {
             Method::IdrexMultiBc => "iD-REX multi-BC",
         }
     }
+
+    /// Its colour (RGB), the same in every figure and recording.
+    pub fn colour(self) -> [u8; 3] {
+        match self {
+            Method::Bc => [127, 127, 127],
+            Method::Drex => [31, 119, 180],
+            Method::IdrexInterpolation => [255, 127, 14],
+            Method::IdrexActionNoise => [44, 160, 44],
+            Method::IdrexMultiBc => [214, 39, 40],
+        }
+    }
+
+    /// The method whose stages a graph node belongs to (`r2/drex/ppo/0` -> D-REX).
+    pub fn of_node(node: &str) -> Option<Method> {
+        node.split('/').find_map(|part| Method::ALL.into_iter().find(|m| m.name() == part))
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

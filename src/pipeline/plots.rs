@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use super::config::Method;
 use super::graph::Graph;
 use super::runner::{Outcome, Status};
 use super::stage::eval::EvalMetrics;
@@ -45,8 +46,9 @@ fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Optio
         for (run, x) in &runs {
             let e = format!("{}/run{run}", entity(prefix));
             let (true_e, learned_e) = (format!("checkpoints_true/{e}"), format!("checkpoints_learned/{e}"));
-            rec.series(&true_e, &format!("{prefix} run {run}"), Style::Line);
-            rec.series(&learned_e, &format!("{prefix} run {run}"), Style::Line);
+            let colour = Method::of_node(prefix).map_or([0, 0, 0], Method::colour);
+            rec.series_coloured(&true_e, &format!("{prefix} run {run}"), Style::Line, colour);
+            rec.series_coloured(&learned_e, &format!("{prefix} run {run}"), Style::Line, colour);
             for c in &x.checkpoints {
                 let mean = c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64;
                 rec.scalar(&true_e, c.step as i64, mean);
@@ -133,6 +135,8 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
     };
     let mut unseen: BTreeMap<String, (String, Vec<f64>, Vec<f64>)> = BTreeMap::new();
     let mut has_clones = false;
+    // (method, replicate) -> each run's final-policy mean return.
+    let mut finals: BTreeMap<(Method, usize), Vec<f64>> = BTreeMap::new();
     let mut lines = vec![format!("# {name}\n\n| node | kind | status |\n|---|---|---|")];
     for n in &g.nodes {
         let status = outcomes.iter().find(|o| o.node == n.name).map_or("-", |o| status_name(&o.status));
@@ -164,7 +168,7 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
             }
             Metrics::Ppo(x) => {
                 let e = format!("ppo_true/{e}");
-                rec.series(&e, &n.name, Style::ThinLine);
+                rec.series_coloured(&e, &n.name, Style::ThinLine, Method::of_node(&n.name).map_or([0, 0, 0], Method::colour));
                 for p in &x.curve {
                     if let Some(r) = p.true_return {
                         rec.scalar(&e, p.step as i64, r);
@@ -172,6 +176,9 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
                 }
             }
             Metrics::Eval(x) => {
+                if let super::stage::Params::Eval(p) = &n.params {
+                    finals.entry((p.method, p.replicate)).or_default().push(x.summary.stats.mean);
+                }
                 // Unseen rollouts scored by the reward this run trained on.
                 if let Some(acc) = &x.reward
                     && let Some((_, src)) = n.inputs.iter().find(|(role, _)| role == "reward")
@@ -189,7 +196,7 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
     }
     checkpoint_curves(&rec, g, &metrics);
     rec.markdown("pipeline", &lines.join("\n"));
-    let plot = |title: &str, root: &str| Panel::Plot { title: title.into(), contents: vec![format!("+ /{root}/**")] };
+    let plot = |title: &str, root: &str| Panel::Plot { title: title.into(), root: root.into() };
     let mut panels = vec![
         plot("Return against noise level (x: noise level in ‰)", "degradation"),
         plot("Learned against true return (x: true return; y: predicted return)", "reward"),
@@ -199,6 +206,19 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         plot("T-REX loss (x: iteration)", "trex_loss"),
         Panel::Text { title: "Pipeline stages".into(), entity: "pipeline".into() },
     ];
+    // A replicated study: each replicate's final returns per method (the mean over its runs).
+    let replicates: std::collections::BTreeSet<usize> = finals.keys().map(|(_, r)| *r).collect();
+    if replicates.len() > 1 {
+        let mut named = std::collections::BTreeSet::new();
+        for ((m, r), runs) in &finals {
+            let e = format!("replicates/{}", m.name());
+            if named.insert(*m) {
+                rec.series_coloured(&e, m.label(), Style::Points, m.colour());
+            }
+            rec.scalar(&e, *r as i64, runs.iter().sum::<f64>() / runs.len() as f64);
+        }
+        panels.push(plot("Each replicate's final policy: true return, mean over its runs (x: replicate)", "replicates"));
+    }
     if has_clones {
         panels.push(plot("Multi-BC clones against their sources (x: source's true return; y: clone's, noise-free)", "clones"));
     }

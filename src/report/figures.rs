@@ -93,13 +93,8 @@ fn save(fig: &impl Figure, dir: &Path, stem: &str) -> Result<()> {
 
 /// Colours by method, the same in every figure.
 fn method_colour(m: Method) -> RGBColor {
-    match m {
-        Method::Bc => RGBColor(127, 127, 127),
-        Method::Drex => RGBColor(31, 119, 180),
-        Method::IdrexInterpolation => RGBColor(255, 127, 14),
-        Method::IdrexActionNoise => RGBColor(44, 160, 44),
-        Method::IdrexMultiBc => RGBColor(214, 39, 40),
-    }
+    let [r, g, b] = m.colour();
+    RGBColor(r, g, b)
 }
 const SERIES: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
