@@ -59,6 +59,7 @@ pub fn check_layout(rrd: &Path, legend_shown: impl Fn(&str) -> bool) -> Vec<Stri
         };
         let prop = |name: &str| p.get(&format!("/view/{id}/{name}")).map(|x| x.rows.clone()).unwrap_or_default();
         assert!(prop("TimeAxis").contains("[1]"), "{title}: x axis not independent: {}", prop("TimeAxis"));
+        assert!(prop("TimeAxis").contains("Absolute="), "{title}: x axis not set to the view's data: {}", prop("TimeAxis"));
         assert!(
             prop("VisibleTimeRanges").contains("{timeline: x, range: {start: {Infinite=null}, end: {Infinite=null}}}"),
             "{title}: not the whole timeline: {}",

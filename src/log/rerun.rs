@@ -9,10 +9,11 @@
 //! Rerun's automatic `log_time` and `log_tick` are off), so no row inherits another plot's x.
 //!
 //! So that every view shows all of its data on opening, whatever the sign and range of its x,
-//! each view's blueprint sets (a) its visible time range on [`X`] to the whole timeline and
-//! (b) its x axis independent of the other views': by default Rerun links all time series
-//! views' x axes to one global range, so one panel's range (true returns around -1,000)
-//! became every panel's, and views whose x is environment steps showed nothing. The Rust
+//! each view's blueprint sets (a) its visible time range on [`X`] to the whole timeline,
+//! (b) its x axis independent of the other views' (by default Rerun links all time series
+//! views' x axes to one global range) and (c) that axis's range to the view's own data:
+//! by default it is a window around the time cursor, which opens at the smallest x of any
+//! view (true returns around -1,000), so views whose x is environment steps showed nothing. The Rust
 //! SDK's view builders cannot set view properties, so the blueprint is written here from
 //! Rerun's blueprint archetypes, as the SDK's builder writes it.
 //!
@@ -31,20 +32,28 @@ use rerun::blueprint::components::{
 };
 use rerun::external::re_log_types::{BlueprintActivationCommand, RecordingId};
 use rerun::external::re_sdk_types::blueprint::archetypes as bp;
+use rerun::external::re_sdk_types::datatypes::{TimeInt, TimeRangeBoundary};
 
 use crate::error::{Error, Result};
 
 /// The one plot timeline.
 pub const X: &str = "x";
 
-/// The most series a view shows a legend for.
-pub const LEGEND_MAX: usize = 8;
+/// The most series a view shows a legend for (more entries cover the data).
+pub const LEGEND_MAX: usize = 4;
 
 pub struct Recording {
     rec: rerun::RecordingStream,
     storage: rerun::sink::MemorySinkStorage,
     /// Series named per top-level entity (a view's root), for the legend policy.
     series: RefCell<BTreeMap<String, usize>>,
+    /// The smallest and largest x logged per top-level entity: each view's x range.
+    extent: RefCell<BTreeMap<String, (i64, i64)>>,
+}
+
+/// The top-level entity of a path: the root a view shows.
+fn root_of(entity: &str) -> String {
+    entity.trim_start_matches('/').split('/').next().unwrap_or_default().to_string()
 }
 
 fn err(path: &Path, e: impl std::fmt::Display) -> Error {
@@ -73,7 +82,7 @@ impl Recording {
             rerun::RecordingStreamBuilder::new("idrex").recording_name(name.to_string()).memory().map_err(|e| err(path, e))?;
         rec.set_log_time_enabled(false);
         rec.set_log_tick_enabled(false);
-        Ok(Recording { rec, storage, series: RefCell::new(BTreeMap::new()) })
+        Ok(Recording { rec, storage, series: RefCell::new(BTreeMap::new()), extent: RefCell::new(BTreeMap::new()) })
     }
 
     /// Names a series and how it is drawn (its legend entry).
@@ -87,8 +96,7 @@ impl Recording {
     }
 
     fn series_in(&self, entity: &str, name: &str, style: Style, colour: Option<[u8; 3]>) {
-        let root = entity.trim_start_matches('/').split('/').next().unwrap_or_default().to_string();
-        *self.series.borrow_mut().entry(root).or_default() += 1;
+        *self.series.borrow_mut().entry(root_of(entity)).or_default() += 1;
         let colours = colour.map(|[r, g, b]| rerun::components::Color::from_rgb(r, g, b));
         let _ = match style {
             Style::Line | Style::ThinLine => {
@@ -114,6 +122,11 @@ impl Recording {
 
     /// One point of a series: `value` at `x` on the plot timeline, and no other time.
     pub fn scalar(&self, entity: &str, x: i64, value: f64) {
+        {
+            let mut extent = self.extent.borrow_mut();
+            let e = extent.entry(root_of(entity)).or_insert((x, x));
+            *e = (e.0.min(x), e.1.max(x));
+        }
         self.rec.reset_time();
         self.rec.set_time_sequence(X, x);
         let _ = self.rec.log(entity, &rerun::Scalars::single(value));
@@ -154,9 +167,15 @@ impl Recording {
                     let n = counts.get(&root).copied().unwrap_or(0);
                     let title = if n > LEGEND_MAX { format!("{n} series, legend hidden (hover a point): {title}") } else { title };
                     let (legend_visible, corner) = (n <= LEGEND_MAX, Corner2D::LeftTop);
-                    stream
-                        .log(format!("{view}/TimeAxis"), &bp::TimeAxis::new().with_link(LinkAxis::Independent))
-                        .map_err(|e| err(path, e))?;
+                    // The x axis spans this view's data (Rerun's default is a window around
+                    // the time cursor, which opens at the smallest x of any view).
+                    let mut axis = bp::TimeAxis::new().with_link(LinkAxis::Independent);
+                    if let Some(&(lo, hi)) = self.extent.borrow().get(&root) {
+                        let pad = ((hi - lo) / 20).max(1);
+                        let (start, end) = (TimeRangeBoundary::Absolute(TimeInt(lo - pad)), TimeRangeBoundary::Absolute(TimeInt(hi + pad)));
+                        axis = axis.with_view_range(rerun::datatypes::TimeRange { start, end });
+                    }
+                    stream.log(format!("{view}/TimeAxis"), &axis).map_err(|e| err(path, e))?;
                     let whole = rerun::datatypes::VisibleTimeRange { timeline: X.into(), range: rerun::datatypes::TimeRange::EVERYTHING };
                     stream.log(format!("{view}/VisibleTimeRanges"), &bp::VisibleTimeRanges::new([whole])).map_err(|e| err(path, e))?;
                     stream
