@@ -522,7 +522,16 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
             init: crate::nn::WeightInit::Normal002,
         };
         let model = crate::nn::seeded(args.seed, || RewardEnsemble::new(config));
-        RewardSource::Learned { model, composition: Composition { ctrl_coeff: 0.1, combine: Combine::Mean, ctrl_action: CtrlAction::Raw } }
+        RewardSource::Learned {
+            model,
+            composition: Composition {
+                ctrl_coeff: 0.1,
+                combine: Combine::Mean,
+                ctrl_action: CtrlAction::Raw,
+                level: Default::default(),
+                disagreement: 0.0,
+            },
+        }
     };
     let run = ppo::train(args.env, &cfg, reward, args.seed, &mut |_| true, None)?;
     let steps = run.curve.last().map_or(0, |p| p.global_step) as f64;

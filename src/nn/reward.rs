@@ -68,6 +68,27 @@ pub enum CtrlAction {
     Raw,
 }
 
+/// Where each member's reward is centred and scaled for RL.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RewardLevel {
+    /// By running statistics of PPO's own experience (the original code): the learned reward
+    /// is centred on what the policy does, so on a task that ends, ending costs nothing.
+    #[default]
+    Running,
+    /// Fixed before training: centred on the member's mean per-step reward over the noisiest
+    /// level of D-REX's ranked set (the worst the ranking knows) and scaled by its per-step
+    /// standard deviation over the whole set. Every better-ranked level then earns a positive
+    /// reward per step, so living pays where the demonstrations live.
+    RankedFloor,
+}
+
+impl RewardLevel {
+    pub fn is_running(&self) -> bool {
+        *self == RewardLevel::Running
+    }
+}
+
 /// The reward PPO optimises, composed from a learned ensemble.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -75,6 +96,18 @@ pub struct Composition {
     pub ctrl_coeff: f64,
     pub combine: Combine,
     pub ctrl_action: CtrlAction,
+    /// Absent from the key when running (the original).
+    #[serde(default, skip_serializing_if = "RewardLevel::is_running")]
+    pub level: RewardLevel,
+    /// A brake on exploitation: k x the members' standard deviation (of their normalised
+    /// outputs, at each step) is subtracted, as the `imitation` library's ensemble does.
+    /// Absent from the key at 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub disagreement: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -92,6 +125,8 @@ pub struct RewardEnsemble {
     pub config: RewardConfig,
     /// One running statistic of raw outputs per model.
     pub norms: Vec<RunningMeanStd>,
+    /// Whether `norms` are fixed ([`RewardLevel::RankedFloor`]): RL then never updates them.
+    pub fixed_norms: bool,
 }
 
 impl RewardEnsemble {
@@ -105,7 +140,7 @@ impl RewardEnsemble {
             .map(|(m, vs)| Mlp::new(&(vs.root() / format!("m{m}")), &sizes, Activation::Relu, config.init.init()))
             .collect();
         let norms = (0..config.models).map(|_| RunningMeanStd::new(1)).collect();
-        RewardEnsemble { stores, nets, config, norms }
+        RewardEnsemble { stores, nets, config, norms, fixed_norms: false }
     }
 
     /// Moves the networks to `device`, where [`RewardEnsemble::raw`] then computes (PPO's
@@ -185,7 +220,7 @@ impl RewardEnsemble {
         update: bool,
     ) -> Vec<f64> {
         let raw = self.raw(next_obs, actions);
-        if update {
+        if update && !self.fixed_norms {
             for (norm, r) in self.norms.iter_mut().zip(&raw) {
                 norm.update(r);
             }
@@ -198,15 +233,52 @@ impl RewardEnsemble {
         };
         (0..n)
             .map(|i| {
-                let learned = match comp.combine {
+                let mut learned = match comp.combine {
                     Combine::Mean => (0..k).map(|m| normalised(m, i)).sum::<f64>() / k as f64,
                     Combine::LastOverCount => normalised(k - 1, i) / k as f64,
                     Combine::Min => (0..k).map(|m| normalised(m, i)).fold(f64::INFINITY, f64::min),
                 };
+                if comp.disagreement != 0.0 {
+                    let mean = (0..k).map(|m| normalised(m, i)).sum::<f64>() / k as f64;
+                    let var = (0..k).map(|m| (normalised(m, i) - mean).powi(2)).sum::<f64>() / k as f64;
+                    learned -= comp.disagreement * var.sqrt();
+                }
                 let a = &cost_actions[i * act_dim..(i + 1) * act_dim];
                 learned - comp.ctrl_coeff * a.iter().map(|&x| (x as f64).powi(2)).sum::<f64>()
             })
             .collect()
+    }
+
+    /// Fixes each member's level from a ranked set ([`RewardLevel::RankedFloor`]): its mean
+    /// per-step raw reward over the noisiest level's steps, its spread over every step.
+    pub fn fix_levels_from(&mut self, set: &[crate::data::Trajectory]) -> Result<()> {
+        let noisiest = set.iter().map(|t| t.meta.noise).fold(f64::NEG_INFINITY, f64::max);
+        let k = self.nets.len();
+        let (mut floor, mut all) = (vec![(0.0f64, 0usize); k], vec![(0.0f64, 0.0f64, 0usize); k]);
+        for t in set.iter().filter(|t| !t.is_empty()) {
+            for (m, r) in self.raw(t.next_obs(), &t.actions).into_iter().enumerate() {
+                for x in r.into_iter().map(f64::from) {
+                    if t.meta.noise == noisiest {
+                        floor[m].0 += x;
+                        floor[m].1 += 1;
+                    }
+                    all[m].0 += x;
+                    all[m].1 += x * x;
+                    all[m].2 += 1;
+                }
+            }
+        }
+        if floor.iter().any(|f| f.1 == 0) {
+            return Err(Error::Invalid("reward.level ranked-floor needs a ranked set with steps at its noisiest level".into()));
+        }
+        for (m, norm) in self.norms.iter_mut().enumerate() {
+            let n = all[m].2 as f64;
+            let mean = all[m].0 / n;
+            norm.mean[0] = floor[m].0 / floor[m].1 as f64;
+            norm.var[0] = (all[m].1 / n - mean * mean).max(1e-12);
+        }
+        self.fixed_norms = true;
+        Ok(())
     }
 
     pub fn save(&self, dir: &Path, hyper: serde_json::Value) -> Result<()> {
@@ -235,6 +307,14 @@ impl RewardEnsemble {
 mod tests {
     use super::*;
 
+    const BASE: Composition = Composition {
+        ctrl_coeff: 0.0,
+        combine: Combine::Mean,
+        ctrl_action: CtrlAction::Raw,
+        level: RewardLevel::Running,
+        disagreement: 0.0,
+    };
+
     #[test]
     fn composition_on_a_fixed_batch() {
         let config = RewardConfig { obs_dim: 2, act_dim: None, hidden: vec![4], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
@@ -249,14 +329,14 @@ mod tests {
         let raw_action = [3.0f32, -0.5];
         let raw = model.raw(&obs, &clipped);
         let norm = |m: usize, i: usize| (raw[m][i] as f64 - m as f64) / (4.0f64 + 1e-8).sqrt();
-        let comp = Composition { ctrl_coeff: 0.1, combine: Combine::Mean, ctrl_action: CtrlAction::Clipped };
+        let comp = Composition { ctrl_coeff: 0.1, combine: Combine::Mean, ctrl_action: CtrlAction::Clipped, ..BASE };
         let mean = model.rl_reward(&obs, &clipped, &clipped, 1, &comp, false);
         for i in 0..2 {
             let want = (norm(0, i) + norm(1, i)) / 2.0 - 0.1 * (clipped[i] as f64).powi(2);
             assert!((mean[i] - want).abs() < 1e-9, "mean {i}: {} vs {want}", mean[i]);
         }
         // The original code: the last model over the count, the cost on the raw action.
-        let original = Composition { ctrl_coeff: 0.1, combine: Combine::LastOverCount, ctrl_action: CtrlAction::Raw };
+        let original = Composition { ctrl_coeff: 0.1, combine: Combine::LastOverCount, ctrl_action: CtrlAction::Raw, ..BASE };
         let last = model.rl_reward(&obs, &clipped, &raw_action, 1, &original, false);
         for i in 0..2 {
             let want = norm(1, i) / 2.0 - 0.1 * (raw_action[i] as f64).powi(2);
@@ -264,11 +344,60 @@ mod tests {
         }
         assert!((last[0] - mean[0]).abs() > 1e-6, "the options change the reward");
         // Pessimistic: the lower of the two normalised outputs at each step.
-        let pessimistic = Composition { ctrl_coeff: 0.1, combine: Combine::Min, ctrl_action: CtrlAction::Clipped };
+        let pessimistic = Composition { ctrl_coeff: 0.1, combine: Combine::Min, ctrl_action: CtrlAction::Clipped, ..BASE };
         let low = model.rl_reward(&obs, &clipped, &clipped, 1, &pessimistic, false);
         for i in 0..2 {
             let want = norm(0, i).min(norm(1, i)) - 0.1 * (clipped[i] as f64).powi(2);
             assert!((low[i] - want).abs() < 1e-9, "min {i}: {} vs {want}", low[i]);
         }
+        // The disagreement brake: the mean minus k x the members' standard deviation.
+        let braked = Composition { disagreement: 2.0, ..comp };
+        let b = model.rl_reward(&obs, &clipped, &clipped, 1, &braked, false);
+        for i in 0..2 {
+            let spread = (norm(0, i) - norm(1, i)).abs() / 2.0;
+            assert!((b[i] - (mean[i] - 2.0 * spread)).abs() < 1e-9, "brake {i}: {} vs {}", b[i], mean[i] - 2.0 * spread);
+        }
+    }
+
+    /// The ranked floor: each member centred on its mean over the noisiest level's steps and
+    /// scaled by its spread over the set, fixed (RL's updates leave it); the running level
+    /// moves with what it sees.
+    #[test]
+    fn the_ranked_floor_fixes_each_members_level() {
+        use crate::data::{TrajMeta, Trajectory};
+        let config = RewardConfig { obs_dim: 1, act_dim: None, hidden: vec![3], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let mut model = crate::nn::seeded(4, || RewardEnsemble::new(config));
+        let traj = |xs: &[f32], noise: f64| Trajectory {
+            obs_dim: 1,
+            act_dim: 1,
+            obs: std::iter::once(0.0).chain(xs.iter().copied()).collect(),
+            actions: vec![0.0; xs.len()],
+            rewards: vec![0.0; xs.len()],
+            terms: vec![Default::default(); xs.len()],
+            meta: TrajMeta { noise, ..Default::default() },
+            ..Default::default()
+        };
+        let set = vec![traj(&[1.0, 2.0], 0.0), traj(&[-1.0, -3.0, 0.5], 1.0)];
+        model.fix_levels_from(&set).unwrap();
+        let raw_at = |m: &RewardEnsemble, xs: &[f32]| m.raw(xs, &vec![0.0; xs.len()]);
+        let (noisy, every) = (raw_at(&model, &[-1.0, -3.0, 0.5]), raw_at(&model, &[1.0, 2.0, -1.0, -3.0, 0.5]));
+        for m in 0..2 {
+            let floor = noisy[m].iter().map(|&x| x as f64).sum::<f64>() / 3.0;
+            let mean = every[m].iter().map(|&x| x as f64).sum::<f64>() / 5.0;
+            let var = every[m].iter().map(|&x| (x as f64 - mean).powi(2)).sum::<f64>() / 5.0;
+            assert!((model.norms[m].mean[0] - floor).abs() < 1e-6, "{m}: {} vs {floor}", model.norms[m].mean[0]);
+            assert!((model.norms[m].var[0] - var).abs() < 1e-6 * var.max(1.0), "{m}");
+        }
+        // Fixed: an RL update leaves the levels where they were; the noisiest level's steps
+        // average 0 and the set's spread is 1 per member.
+        let before = model.norms.clone();
+        let comp = BASE;
+        let r = model.rl_reward(&[-1.0, -3.0, 0.5], &[0.0; 3], &[0.0; 3], 1, &comp, true);
+        assert_eq!(model.norms, before);
+        assert!(r.iter().sum::<f64>().abs() < 1e-4, "{r:?}");
+        // The running level moves.
+        model.fixed_norms = false;
+        model.rl_reward(&[5.0, 6.0], &[0.0; 2], &[0.0; 2], 1, &comp, true);
+        assert_ne!(model.norms, before);
     }
 }

@@ -8,7 +8,7 @@ use super::idrex::{clone::CloneConfig, multi_bc::CloneFilter};
 use crate::algo::noise::NoiseProcess;
 use crate::algo::{bc::BcConfig, ppo::Backend, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
-use crate::nn::reward::{Combine, Composition, CtrlAction};
+use crate::nn::reward::{Combine, Composition, CtrlAction, RewardLevel};
 use crate::nn::{Device, DeviceChoice};
 
 pub const SCHEMA_VERSION: u32 = 1;
@@ -174,6 +174,11 @@ pub struct RewardSettings {
     pub combine: Combine,
     /// raw (the original code; the default), or clipped.
     pub ctrl_action: CtrlAction,
+    /// Where each member is centred and scaled for RL: running (PPO's own experience; the
+    /// original code and the default) or ranked-floor (fixed from D-REX's ranked set).
+    pub level: RewardLevel,
+    /// k in mean - k x the members' spread, a brake on exploitation (0: none, the default).
+    pub disagreement: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -559,6 +564,9 @@ impl Pipeline {
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
             bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
         }
+        if !(spec.reward.disagreement.is_finite() && spec.reward.disagreement >= 0.0) {
+            bad(&["reward", "disagreement"], format!("reward.disagreement is {}; give k >= 0 (0: no brake)", spec.reward.disagreement));
+        }
         if let Err(e) = spec.idrex.multi_bc.check() {
             bad(&["idrex", "multi_bc"], e);
         }
@@ -601,7 +609,13 @@ impl Pipeline {
             return Err(first);
         };
         let ctrl_coeff = spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
-        let composition = Composition { ctrl_coeff, combine: spec.reward.combine, ctrl_action: spec.reward.ctrl_action };
+        let composition = Composition {
+            ctrl_coeff,
+            combine: spec.reward.combine,
+            ctrl_action: spec.reward.ctrl_action,
+            level: spec.reward.level,
+            disagreement: spec.reward.disagreement,
+        };
         let device = spec.device.resolve();
         let replicates = first_replicate..first_replicate + replicates;
         Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, replicates, replicate: 0, device })

@@ -115,11 +115,17 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .iter()
         .enumerate()
         .map(|(r, &seed)| {
+            let mut inputs = vec![io("reward", reward)];
+            if !p.composition.level.is_running() {
+                // D-REX's ranked set, the reward's first: where the ranked floor is measured.
+                let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| role == "set0")).map(|(_, n)| n.clone());
+                inputs.push(io("floor", &set0.expect("a T-REX node trains on set0")));
+            }
             let run = g.push(
                 format!("{prefix}/ppo/{r}"),
                 Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m), reward: p.composition, device: p.device }),
                 seed,
-                vec![io("reward", reward)],
+                inputs,
             );
             g.push(
                 format!("{prefix}/eval/{r}"),
@@ -308,6 +314,32 @@ mod tests {
         let p = |text: &str| Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
         let (a, b) = (expand(&p(BASE)).unwrap().keys(), expand(&p(&format!("{BASE}{extra}"))).unwrap().keys());
         a.keys().filter(|n| a[*n] != b[*n]).cloned().collect()
+    }
+
+    /// The reward's level and the disagreement brake touch PPO only: exactly the PPO stages
+    /// and what depends on them change (the stored rewards are reused); their defaults (the
+    /// original's) change nothing.
+    #[test]
+    fn reward_options_change_exactly_the_rl_stages_and_what_follows() {
+        let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
+        let mut expected: Vec<String> =
+            g.nodes.iter().filter(|n| n.kind() == StageKind::Ppo).flat_map(|n| g.descendants(&n.name)).collect();
+        expected.sort();
+        expected.dedup();
+        assert!(!expected.is_empty());
+        for extra in ["reward:\n  level: ranked-floor\n", "reward:\n  disagreement: 0.5\n"] {
+            let mut got = changed(extra);
+            got.sort();
+            assert_eq!(got, expected, "{extra}");
+            // D-REX's reward and multi-BC's judge (trained on D-REX's sets) are reused.
+            assert!(!got.iter().any(|n| n == "drex/trex" || n == "bc" || n.ends_with("/judge")), "{got:?}");
+        }
+        assert!(changed("reward:\n  level: running\n  disagreement: 0\n").is_empty());
+        // The ranked floor is measured on D-REX's set.
+        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}reward:\n  level: ranked-floor\n")).unwrap();
+        let g = expand(&p).unwrap();
+        let ppo = g.get("drex/ppo/0").unwrap();
+        assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
     }
 
     /// Replicate r has the same keys whatever the count, replicate 0 those of the file

@@ -1,12 +1,13 @@
 //! `ppo`: one RL run on a learned reward ([`crate::algo::ppo`]); the final policy, its
 //! learning curve and a checkpoint every `ppo.checkpoint_every` updates
 //! (`checkpoints/step-<global step>/`, the final policy always among them), which the
-//! evaluation stage evaluates one by one.
+//! evaluation stage evaluates one by one. With `reward.level: ranked-floor`, the reward's
+//! levels are fixed from the `floor` input (D-REX's ranked set) before training.
 use super::{POLICY, REWARD, StageCtx, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
 use crate::env::EnvId;
 use crate::error::Result;
-use crate::nn::reward::Composition;
+use crate::nn::reward::{Composition, RewardLevel};
 use crate::nn::{Device, RewardEnsemble};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -43,6 +44,9 @@ pub const CURVE: &str = "curve.csv";
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
     let mut reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    if p.reward.level == RewardLevel::RankedFloor {
+        reward.fix_levels_from(&super::read_rollouts(ctx.input("floor")?)?)?;
+    }
     reward.to_device(p.device)?;
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut on_update = |u: &ppo::PpoProgress| {
