@@ -2,6 +2,7 @@
 mod util;
 
 mod bootstrap;
+mod docs;
 mod env_cli;
 mod env_equivalence;
 mod pipeline;
