@@ -24,181 +24,29 @@
 //! published there first) and is then pushed, manifest last.
 pub mod s3;
 
-use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{Read, Write};
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use sha2::{Digest, Sha256};
-
 use crate::error::{Error, Result};
 
-pub const MANIFEST: &str = "manifest.json";
+mod claims;
+mod gc;
+mod location;
+mod locks;
+mod manifest;
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct OutputFile {
-    pub path: String,
-    pub sha256: String,
-    pub size: u64,
-}
-
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Manifest {
-    pub key: String,
-    pub kind: String,
-    pub version: u32,
-    /// The pipeline node this artifact was computed for (not part of the key).
-    pub node: String,
-    pub params: serde_json::Value,
-    pub seed: u64,
-    /// Input role -> key.
-    pub inputs: BTreeMap<String, String>,
-    pub outputs: Vec<OutputFile>,
-    pub metrics: serde_json::Value,
-    pub started_unix: f64,
-    pub ended_unix: f64,
-    pub wall_s: f64,
-    pub idrex_version: String,
-    /// The kernel variant the CPU computed with ([`crate::nn::gemm::Kernel`]), as information
-    /// only: every variant gives the same bytes. Absent from manifests written before it was
-    /// recorded.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub kernel: Option<String>,
-}
-
-/// The key of a stage instance.
-pub fn key(kind: &str, version: u32, params: &serde_json::Value, seed: u64, inputs: &BTreeMap<String, String>) -> String {
-    // serde_json's Map is a BTreeMap (no preserve_order feature): keys serialise sorted.
-    // key_format 2: parameters became typed structs (some gained fields, the PPO curve
-    // changed columns), so every key changed once. key_format 3: rollout MCAP files omit an
-    // absent learned reward instead of writing null, so their bytes changed.
-    let canonical = serde_json::json!({
-        "key_format": 3, "kind": kind, "version": version, "params": params, "seed": seed, "inputs": inputs,
-    });
-    hex(&Sha256::digest(canonical.to_string().as_bytes()))
-}
-
-pub(crate) fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-pub fn sha256_file(path: &Path) -> Result<(String, u64)> {
-    let mut f = File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut h = Sha256::new();
-    let mut buf = vec![0u8; 1 << 16];
-    let mut size = 0u64;
-    loop {
-        let n = f.read(&mut buf).map_err(|e| Error::io(path, e))?;
-        if n == 0 {
-            break;
-        }
-        size += n as u64;
-        h.update(&buf[..n]);
-    }
-    Ok((hex(&h.finalize()), size))
-}
-
-/// Every file under `dir` but the manifest, with its sha256 and size, in path order.
-pub fn hash_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
-    let mut files: Vec<PathBuf> =
-        walkdir::WalkDir::new(dir).into_iter().filter_map(|e| e.ok()).filter(|e| e.file_type().is_file()).map(|e| e.into_path()).collect();
-    files.sort();
-    let mut out = Vec::with_capacity(files.len());
-    for f in &files {
-        let rel = f.strip_prefix(dir).expect("under the directory").to_string_lossy().into_owned();
-        if rel != MANIFEST {
-            let (sha256, size) = sha256_file(f)?;
-            out.push(OutputFile { path: rel, sha256, size });
-        }
-    }
-    Ok(out)
-}
-
-pub fn now_unix() -> f64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
-}
-
-/// Where a store lives: a directory, or a prefix in an S3-compatible bucket.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Location {
-    Local(PathBuf),
-    S3 { bucket: String, prefix: String },
-}
-
-impl Location {
-    /// `s3://bucket/prefix` or a directory path.
-    pub fn parse(text: &str) -> Result<Location> {
-        let Some(rest) = text.strip_prefix("s3://") else { return Ok(Location::Local(PathBuf::from(text))) };
-        let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
-        if bucket.is_empty() {
-            return Err(Error::Invalid(format!("store URL {text}: no bucket; write s3://BUCKET/PREFIX")));
-        }
-        Ok(Location::S3 { bucket: bucket.to_string(), prefix: prefix.trim_matches('/').to_string() })
-    }
-
-    /// A relative directory is taken relative to `base` (the pipeline file's directory).
-    pub fn relative_to(self, base: &Path) -> Location {
-        match self {
-            Location::Local(p) => Location::Local(base.join(p)),
-            s3 => s3,
-        }
-    }
-
-    /// The directory where an S3 store's artifacts are staged and cached on this machine:
-    /// `$IDREX_S3_CACHE` or `~/.cache/idrex/s3`, then bucket and prefix.
-    fn cache_dir(bucket: &str, prefix: &str) -> PathBuf {
-        let base = std::env::var_os("IDREX_S3_CACHE").map(PathBuf::from).unwrap_or_else(|| {
-            let home = std::env::var_os("XDG_CACHE_HOME")
-                .map(PathBuf::from)
-                .unwrap_or_else(|| PathBuf::from(std::env::var_os("HOME").unwrap_or_else(|| "/tmp".into())).join(".cache"));
-            home.join("idrex").join("s3")
-        });
-        let dir = base.join(bucket);
-        if prefix.is_empty() { dir.join("_") } else { dir.join(prefix) }
-    }
-}
-
-impl std::fmt::Display for Location {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Location::Local(p) => write!(f, "{}", p.display()),
-            Location::S3 { bucket, prefix } if prefix.is_empty() => write!(f, "s3://{bucket}"),
-            Location::S3 { bucket, prefix } => write!(f, "s3://{bucket}/{prefix}"),
-        }
-    }
-}
-
+pub use claims::NodeDef;
+pub use location::Location;
+pub use locks::{KeyLock, UseLock};
+pub use manifest::{MANIFEST, Manifest, OutputFile, hash_outputs, key, now_unix, sha256_file};
 #[derive(Debug, Clone)]
 pub struct Store {
     /// The store's directory; for an S3 store, the local cache it stages and reads through.
     root: PathBuf,
     remote: Option<Arc<s3::Remote>>,
-}
-
-/// A node as submitted: what `idrex stage run KEY` executes on another machine. Its key is
-/// recomputed from these fields before it runs, so a definition from another idrex version
-/// (or a damaged one) is refused rather than run under the wrong key.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct NodeDef {
-    pub key: String,
-    pub node: String,
-    pub kind: String,
-    pub version: u32,
-    pub params: serde_json::Value,
-    pub seed: u64,
-    pub inputs: BTreeMap<String, String>,
-}
-
-/// Holds a key's lock until dropped.
-pub struct KeyLock {
-    _file: File,
-}
-
-/// Holds the store's use lock (shared by pipeline runs, exclusive for gc) until dropped.
-pub struct UseLock {
-    _file: File,
 }
 
 /// A stage's output directory before publication, owned through a lock on `<dir>.lock`.
@@ -307,47 +155,6 @@ impl Store {
 
     pub fn dir(&self, key: &str) -> PathBuf {
         self.root.join(key)
-    }
-
-    /// Blocks until this process holds `key`'s lock; `waiting` is told who holds it first
-    /// when someone does.
-    pub fn lock(&self, key: &str) -> Result<KeyLock> {
-        self.lock_or_wait(key, &mut |_| {})
-    }
-
-    pub fn lock_or_wait(&self, key: &str, waiting: &mut dyn FnMut(&str)) -> Result<KeyLock> {
-        let locks = self.root.join(".locks");
-        std::fs::create_dir_all(&locks).map_err(|e| Error::io(&locks, e))?; // a cache may be deleted under a run
-        let path = locks.join(format!("{key}.lock"));
-        let file = File::options().create(true).truncate(false).read(true).write(true).open(&path).map_err(|e| Error::io(&path, e))?;
-        if file.try_lock().is_err() {
-            let who = std::fs::read_to_string(&path).unwrap_or_default();
-            waiting(if who.trim().is_empty() { "another run" } else { who.trim() });
-            file.lock().map_err(|e| Error::io(&path, e))?;
-        }
-        let _ = file.set_len(0).and_then(|_| (&file).write_all(holder().as_bytes()));
-        Ok(KeyLock { _file: file })
-    }
-
-    fn use_lock_file(&self) -> Result<File> {
-        let path = self.root.join(".locks").join("store.lock");
-        File::options().create(true).truncate(false).write(true).open(&path).map_err(|e| Error::io(&path, e))
-    }
-
-    /// Marks the store as in use by a pipeline run (shared with other runs) until dropped.
-    pub fn in_use(&self) -> Result<UseLock> {
-        let file = self.use_lock_file()?;
-        file.lock_shared().map_err(|e| Error::io(self.root.join(".locks/store.lock"), e))?;
-        Ok(UseLock { _file: file })
-    }
-
-    /// The store to itself, for deleting: fails while a pipeline run uses it.
-    pub fn exclusive(&self) -> Result<UseLock> {
-        let file = self.use_lock_file()?;
-        file.try_lock().map_err(|_| {
-            Error::Invalid(format!("a pipeline run is using the store {}; run gc again when it has finished", self.root.display()))
-        })?;
-        Ok(UseLock { _file: file })
     }
 
     /// The manifest of `key` if it is published and intact. A corrupt artifact is moved to
@@ -607,137 +414,12 @@ impl Store {
         }
         Ok(self.keys()?.into_iter().filter_map(|k| self.check(&k).err().map(|p| (k, p))).collect())
     }
-
-    /// Removes every artifact not in `keep` (and stale staging entries); returns what was
-    /// (or, with `dry_run`, would be) removed.
-    pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
-        if let Some(r) = &self.remote {
-            return self.remote_gc(r, keep, dry_run);
-        }
-        let _alone = if dry_run { None } else { Some(self.exclusive()?) };
-        let mut removed = Vec::new();
-        for k in self.keys()? {
-            if !keep.contains(&k) {
-                if !dry_run {
-                    let _lock = self.lock(&k)?;
-                    let path = self.dir(&k);
-                    let gone = if path.is_dir() { std::fs::remove_dir_all(&path) } else { std::fs::remove_file(&path) };
-                    gone.map_err(|e| Error::io(&path, e))?;
-                }
-                removed.push(k);
-            }
-        }
-        Ok(removed)
-    }
-}
-
-impl Store {
-    /// Manifests first, then the blobs no remaining manifest names. A blob younger than an
-    /// hour stays: it may belong to an upload whose manifest is not committed yet (there is
-    /// no lock across machines, so gc cannot see a run elsewhere).
-    fn remote_gc(&self, r: &s3::Remote, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
-        let keys = r.keys()?;
-        let removed: Vec<String> = keys.iter().filter(|k| !keep.contains(*k)).cloned().collect();
-        if dry_run {
-            return Ok(removed);
-        }
-        // Runs on this machine, at least, are seen (through the cache's use lock).
-        let _alone = self.exclusive()?;
-        for k in &removed {
-            r.delete_artifact(k)?;
-        }
-        // Definitions and claims of nodes never computed (failed jobs), unless still named.
-        for k in r.submitted()? {
-            if !keep.contains(&k) && !keys.contains(&k) {
-                r.delete_submission(&k)?;
-            }
-        }
-        let mut referenced = std::collections::BTreeSet::new();
-        for k in keys.iter().filter(|k| keep.contains(*k)) {
-            if let Some(m) = r.manifest(k)? {
-                referenced.extend(m.outputs.into_iter().map(|o| o.sha256));
-            }
-        }
-        let young = now_unix() as i64 - 3600;
-        for (sha, _, modified) in r.list("blobs")? {
-            if !referenced.contains(&sha) && modified < young {
-                r.delete(&s3::Remote::blob_path(&sha))?;
-            }
-        }
-        Ok(removed)
-    }
-
-    /// Records a node's definition next to the artifacts, for `idrex stage run KEY`.
-    pub fn put_def(&self, def: &NodeDef) -> Result<()> {
-        let text = serde_json::to_string_pretty(def).expect("a definition serialises") + "\n";
-        match &self.remote {
-            Some(r) => {
-                r.create(&format!("defs/{}.json", def.key), text.into_bytes())?;
-                Ok(())
-            }
-            None => {
-                let dir = self.root.join(".defs");
-                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-                let path = dir.join(format!("{}.json", def.key));
-                let tmp = dir.join(format!(".{}.{}", def.key, std::process::id()));
-                std::fs::write(&tmp, text).and_then(|_| std::fs::rename(&tmp, &path)).map_err(|e| Error::io(&path, e))
-            }
-        }
-    }
-
-    /// Claims attempt `n` at computing `key` for `who` (a Slurm job id): create-if-absent,
-    /// so of two submitters racing for one attempt exactly one wins.
-    pub fn claim(&self, key: &str, n: u32, who: &str) -> Result<s3::Created> {
-        match &self.remote {
-            Some(r) => r.create(&format!("claims/{key}/{n}"), who.as_bytes().to_vec()),
-            None => {
-                let dir = self.root.join(".claims").join(key);
-                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-                let path = dir.join(n.to_string());
-                // Written whole to the side, then linked into place: link fails if the name
-                // exists, and a reader never sees a claim half-written.
-                let tmp = dir.join(format!(".{n}.{}.{}", std::process::id(), STAGING_COUNTER.fetch_add(1, Ordering::Relaxed)));
-                std::fs::write(&tmp, who).map_err(|e| Error::io(&tmp, e))?;
-                let linked = std::fs::hard_link(&tmp, &path);
-                let _ = std::fs::remove_file(&tmp);
-                match linked {
-                    Ok(()) => Ok(s3::Created::Yes),
-                    Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(s3::Created::AlreadyThere),
-                    Err(e) => Err(Error::io(&path, e)),
-                }
-            }
-        }
-    }
-
-    /// The latest claim on `key`: (attempt, who).
-    pub fn last_claim(&self, key: &str) -> Result<Option<(u32, String)>> {
-        let names: Vec<String> = match &self.remote {
-            Some(r) => r.list(&format!("claims/{key}"))?.into_iter().map(|(n, _, _)| n).collect(),
-            None => std::fs::read_dir(self.root.join(".claims").join(key))
-                .map(|d| d.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
-                .unwrap_or_default(),
-        };
-        let Some(n) = names.iter().filter_map(|n| n.parse::<u32>().ok()).max() else { return Ok(None) };
-        let who = match &self.remote {
-            Some(r) => r.get(&format!("claims/{key}/{n}"))?.unwrap_or_default(),
-            None => std::fs::read(self.root.join(".claims").join(key).join(n.to_string())).unwrap_or_default(),
-        };
-        Ok(Some((n, String::from_utf8_lossy(&who).into_owned())))
-    }
-
-    pub fn get_def(&self, key: &str) -> Result<Option<NodeDef>> {
-        let bytes = match &self.remote {
-            Some(r) => r.get(&format!("defs/{key}.json"))?,
-            None => std::fs::read(self.root.join(".defs").join(format!("{key}.json"))).ok(),
-        };
-        bytes
-            .map(|b| serde_json::from_slice(&b).map_err(|e| Error::Invalid(format!("{}: definition of {key}: {e}", self.location()))))
-            .transpose()
-    }
 }
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeMap;
+
     use super::*;
 
     fn manifest(kind: &str) -> Manifest {

@@ -29,7 +29,8 @@ use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, ObjectStoreExt, PutMode, PutPayload};
 use sha2::{Digest, Sha256};
 
-use super::{MANIFEST, Manifest, hex};
+use super::manifest::hex;
+use super::{MANIFEST, Manifest};
 use crate::error::{Error, Result};
 
 /// A bucket and a prefix in it, with a connection.
