@@ -75,7 +75,13 @@ impl Metrics {
 /// each episode's mean per-step reward, over the member's per-step standard deviation on the
 /// demonstrations; averaged over members. Neither the episodes' lengths nor the members'
 /// offsets (which T-REX leaves unidentified) change it, nor the members' scales.
-pub fn per_step_score(reward: &RewardEnsemble, demos: &[Trajectory], trajs: &[Trajectory], baseline: &[Trajectory]) -> f64 {
+/// Each member's per-step standard deviation over the demonstrations: the score's units.
+pub fn demo_scale(reward: &RewardEnsemble, demos: &[Trajectory]) -> Vec<f64> {
+    crate::pipeline::stage::eval::member_stats(reward, demos).into_iter().map(|(_, sd)| sd).collect()
+}
+
+/// (`scale`: [`demo_scale`].)
+pub fn per_step_score(reward: &RewardEnsemble, scale: &[f64], trajs: &[Trajectory], baseline: &[Trajectory]) -> f64 {
     let members = reward.nets.len();
     // Each member's per-step mean of each episode, averaged over episodes.
     let level = |ts: &[Trajectory]| {
@@ -88,7 +94,6 @@ pub fn per_step_score(reward: &RewardEnsemble, demos: &[Trajectory], trajs: &[Tr
         let n = ts.iter().filter(|t| !t.is_empty()).count().max(1) as f64;
         sums.into_iter().map(|s| s / n).collect::<Vec<_>>()
     };
-    let scale: Vec<f64> = crate::pipeline::stage::eval::member_stats(reward, demos).into_iter().map(|(_, sd)| sd).collect();
     let (a, b) = (level(trajs), level(baseline));
     (0..members).map(|m| (a[m] - b[m]) / scale[m]).sum::<f64>() / members as f64
 }
@@ -120,10 +125,16 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
 
 pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     let mut env = Env::new(p.env)?;
-    let previous = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    // Each reward with its units, measured once on the demonstrations.
+    let demos = read_rollouts(ctx.input("demos")?)?;
+    let scaled = |r: RewardEnsemble| {
+        let scale = demo_scale(&r, &demos);
+        (r, scale)
+    };
+    let previous = scaled(RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?);
     let judge = match p.filter {
         CloneFilter::None | CloneFilter::PreviousReward => None,
-        CloneFilter::HeldOutReward => Some(RewardEnsemble::load(&ctx.input("judge")?.join(REWARD))?),
+        CloneFilter::HeldOutReward => Some(scaled(RewardEnsemble::load(&ctx.input("judge")?.join(REWARD))?)),
     };
     // The newest earlier set with rollouts (an earlier multi-BC set may have kept none).
     let mut baseline = None;
@@ -133,7 +144,6 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
             baseline = Some((i, least_noisy(&set)));
         }
     }
-    let demos = read_rollouts(ctx.input("demos")?)?;
     let source_step = match p.clone.source {
         clone::CloneSource::Final => None,
         clone::CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered("eval"))?),
@@ -146,8 +156,9 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r as u64);
         let trajs = rollout::epsilon_greedy(&mut env, &made.policy, &p.schedule, p.rollouts_per_level, seed, &meta);
-        let score_under =
-            |reward: &RewardEnsemble| baseline.as_ref().map(|(_, base)| per_step_score(reward, &demos, &made.fidelity_episodes, base));
+        let score_under = |(reward, scale): &(RewardEnsemble, Vec<f64>)| {
+            baseline.as_ref().map(|(_, base)| per_step_score(reward, scale, &made.fidelity_episodes, base))
+        };
         let previous_reward_score = score_under(&previous);
         let score = match p.filter {
             CloneFilter::None => None,
@@ -207,8 +218,8 @@ mod tests {
         let short_high = vec![constant(20, hi)];
         let long_high = vec![constant(400, hi)];
         let base = vec![constant(100, lo)];
-        let a = per_step_score(&reward, &demos, &short_high, &base);
-        let b = per_step_score(&reward, &demos, &long_high, &base);
+        let a = per_step_score(&reward, &demo_scale(&reward, &demos), &short_high, &base);
+        let b = per_step_score(&reward, &demo_scale(&reward, &demos), &long_high, &base);
         assert!(a > 0.0, "{a}");
         assert!((a - b).abs() < 1e-9 * a.abs(), "{a} vs {b}");
         // The same ensemble with every output shifted by +5 (the last layer's bias).
@@ -219,14 +230,14 @@ mod tests {
                 let _ = b.shallow_clone().g_add_scalar_(5.0);
             }
         });
-        let c = per_step_score(&shifted, &demos, &short_high, &base);
+        let c = per_step_score(&shifted, &demo_scale(&shifted, &demos), &short_high, &base);
         assert!((a - c).abs() < 1e-4 * a.abs(), "{a} vs {c}");
         // Teeth: the summed predicted return of the short episode falls below the long
         // baseline's once the offset is added, though its per-step reward is higher.
         let summed = |m: &RewardEnsemble, t: &Trajectory| m.predicted_return(t.next_obs(), &t.actions);
         assert!(summed(&shifted, &short_high[0]) < summed(&shifted, &base[0]));
         // And it is symmetric: the baseline against the clone scores minus as much.
-        let d = per_step_score(&reward, &demos, &base, &short_high);
+        let d = per_step_score(&reward, &demo_scale(&reward, &demos), &base, &short_high);
         assert!((a + d).abs() < 1e-9 * a.abs());
     }
 }
