@@ -2,7 +2,7 @@
 //! evaluations: any [`Actor`] in one environment, full episodes, actions clipped to the box
 //! before the step (Gymnasium's ClipAction, as CleanRL and SB3 use). The base actors live
 //! here too: a stored policy ([`PolicyActor`]) and uniform random actions; the noise that
-//! wraps them is in [`crate::algo::noise`].
+//! wraps them is in `algo::noise`, one layer up.
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -87,24 +87,6 @@ pub fn at_levels<A: Actor>(
         }
     }
     out
-}
-
-/// D-REX's noise injection: epsilon-greedy rollouts around a policy's mean action, `per_level`
-/// per epsilon of `schedule`.
-pub fn epsilon_greedy(
-    env: &mut Env,
-    policy: &ActorCritic,
-    schedule: &[f64],
-    per_level: usize,
-    seed: u64,
-    meta: &TrajMeta,
-) -> Vec<Trajectory> {
-    let uniform = UniformActor::of(env);
-    at_levels(env, seed, schedule, per_level, meta, |eps| crate::algo::noise::EpsilonGreedy {
-        inner: PolicyActor::mean_of(policy),
-        eps,
-        uniform: uniform.clone(),
-    })
 }
 
 /// A policy acting with its mean action or sampling from its Gaussian.

@@ -5,6 +5,7 @@ mod bootstrap;
 mod docs;
 mod env_cli;
 mod env_equivalence;
+mod layout;
 mod pipeline;
 mod recording;
 mod reliability;

@@ -7,7 +7,10 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use crate::rollout::{Actor, UniformActor};
+use crate::data::{TrajMeta, Trajectory};
+use crate::env::Env;
+use crate::nn::ActorCritic;
+use crate::rollout::{self, Actor, PolicyActor, UniformActor};
 
 /// The noise processes iD-REX's action-noise variant can inject (`idrex.action_noise`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -31,6 +34,24 @@ impl NoiseProcess {
             NoiseProcess::TimeCorrelated => Box::new(TimeCorrelated::new(inner, sigma, 10, act_dim)),
         }
     }
+}
+
+/// D-REX's noise injection: epsilon-greedy rollouts around a policy's mean action, `per_level`
+/// per epsilon of `schedule`.
+pub fn epsilon_greedy(
+    env: &mut Env,
+    policy: &ActorCritic,
+    schedule: &[f64],
+    per_level: usize,
+    seed: u64,
+    meta: &TrajMeta,
+) -> Vec<Trajectory> {
+    let uniform = UniformActor::of(env);
+    rollout::at_levels(env, seed, schedule, per_level, meta, |eps| EpsilonGreedy {
+        inner: PolicyActor::mean_of(policy),
+        eps,
+        uniform: uniform.clone(),
+    })
 }
 
 /// With probability `eps` a uniform random action in the box, else the inner policy's.

@@ -11,9 +11,10 @@ use anyhow::Context;
 use crate::algo::bc::BcConfig;
 use crate::cli::pipeline::{StoreAccess, load};
 use crate::env::Env;
+use crate::pipeline::config::{CloneConfig, CloneLabels, CloneSource, SourceActing};
 use crate::pipeline::expand;
-use crate::pipeline::idrex::clone::{self, CloneConfig, CloneLabels, CloneSource, SourceActing};
-use crate::pipeline::idrex::multi_bc;
+use crate::pipeline::stage::idrex::clone;
+use crate::pipeline::stage::idrex::multi_bc;
 use crate::stats::median;
 
 #[derive(Debug, clap::Args)]

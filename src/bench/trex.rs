@@ -34,7 +34,7 @@ pub struct TrexBenchArgs {
 fn eps_rollouts(env: &mut Env, policy: &crate::nn::ActorCritic, per_level: usize, seed: u64) -> Vec<crate::data::Trajectory> {
     let schedule: Vec<f64> = (0..20).map(|level| level as f64 * 0.05).collect();
     let meta = crate::data::TrajMeta { source: "bench".into(), ..Default::default() };
-    crate::rollout::epsilon_greedy(env, policy, &schedule, per_level, seed, &meta)
+    crate::algo::noise::epsilon_greedy(env, policy, &schedule, per_level, seed, &meta)
 }
 
 pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {

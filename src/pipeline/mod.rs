@@ -1,11 +1,18 @@
 //! The pipeline engine: YAML experiment files ([`config`]) expand to a DAG of stage
-//! instances ([`graph`], with iD-REX's iterations in [`idrex`]) whose results are
-//! content-addressed artifacts in the store ([`crate::store`]); [`runner`] executes what is
-//! missing; [`stage`] holds each kind's parameters, metrics and body.
+//! instances ([`graph`]) whose results are content-addressed artifacts in the store
+//! ([`crate::store`]); [`runner`] executes what is missing; [`stage`] holds each kind's
+//! parameters, metrics and body.
+//!
+//! The layers, lowest first (each imports only those before it): [`kind`] (the stage kinds'
+//! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
+//! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG),
+//! [`schedule`] and [`cores`] (ordering and threads), [`runner`], [`slurm`], [`recompute`]
+//! and [`plots`].
 pub mod config;
 pub mod cores;
 pub mod graph;
-pub mod idrex;
+pub mod kind;
+pub mod load;
 pub mod plots;
 pub mod recompute;
 pub mod runner;
@@ -13,5 +20,6 @@ pub mod schedule;
 pub mod slurm;
 pub mod stage;
 
-pub use config::{Method, Pipeline};
+pub use config::Method;
 pub use graph::{Graph, Node, expand};
+pub use load::Pipeline;

@@ -20,11 +20,6 @@ fn working_style() -> ProgressStyle {
     ProgressStyle::with_template("  {spinner} {prefix:<30} {elapsed:>4} {wide_msg}").expect("template")
 }
 
-/// A running stage that knows its amount of work: a bar, percent and time left.
-pub fn bar_style() -> ProgressStyle {
-    ProgressStyle::with_template("  {spinner} {prefix:<30} {bar:20} {percent:>3}% eta {eta:>4} {wide_msg}").expect("template")
-}
-
 #[derive(Debug, Clone, PartialEq)]
 pub enum Status {
     /// Found intact in the store.

@@ -9,7 +9,7 @@ use polars::prelude::*;
 use super::{Artifacts, pe};
 use crate::error::Result;
 use crate::pipeline::Method;
-use crate::pipeline::idrex::clone::CloneRecord;
+use crate::pipeline::stage::idrex::clone::CloneRecord;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 
 #[derive(Debug, Clone, PartialEq)]

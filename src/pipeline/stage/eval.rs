@@ -191,3 +191,39 @@ pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     ctx.write_rollouts(p.env, &trajs, learned.as_deref())?;
     Ok(EvalMetrics { summary: RolloutSummary::of(&trajs), reward: accuracy, checkpoints })
 }
+
+/// The checkpoints a method's runs chose, pooled over the runs (the steps every run has).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Selection {
+    /// The highest pooled true return: the paper's protocol.
+    pub by_ground_truth: Option<usize>,
+    /// The highest pooled pessimistic learned return, where every run has learned scores.
+    pub without_ground_truth: Option<usize>,
+}
+
+/// Chooses checkpoints from the runs' checkpoint evaluations (one slice per run): the
+/// report's protocols and multi-BC's `source: checkpoint` choose with this.
+pub fn select(runs: &[&[CheckpointEval]]) -> Selection {
+    let mut steps: Vec<usize> = runs.first().map(|r| r.iter().map(|c| c.step).collect()).unwrap_or_default();
+    steps.retain(|s| runs.iter().all(|r| r.iter().any(|c| c.step == *s)));
+    let at = |r: &[CheckpointEval], s: usize| r.iter().find(|c| c.step == s).cloned().expect("a common step");
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    Selection {
+        by_ground_truth: argmax(&steps, |s| Some(mean(&runs.iter().flat_map(|r| at(r, s).returns).collect::<Vec<_>>()))),
+        without_ground_truth: argmax(&steps, |s| {
+            runs.iter().map(|r| at(r, s).learned.map(|l| l.pessimistic)).collect::<Option<Vec<_>>>().map(|v| mean(&v))
+        }),
+    }
+}
+
+/// The step maximising `score` (the earliest on ties), if any.
+fn argmax(steps: &[usize], score: impl Fn(usize) -> Option<f64>) -> Option<usize> {
+    let mut best: Option<(usize, f64)> = None;
+    for &s in steps {
+        let Some(v) = score(s) else { return None };
+        if best.is_none_or(|(_, b)| v > b) {
+            best = Some((s, v));
+        }
+    }
+    best.map(|(s, _)| s)
+}

@@ -1,5 +1,5 @@
 //! The stage kinds a pipeline is made of. Each kind has one file here (the iD-REX rollout
-//! stages are in [`super::idrex`]) holding its typed parameters, its typed metrics and its
+//! stages are in [`idrex`]) holding its typed parameters, its typed metrics and its
 //! body. This root keeps the kind enum, the context a body gets and the dispatch.
 //!
 //! A stage reads its inputs' artifact directories and writes into its own staging
@@ -23,6 +23,7 @@
 pub mod bc;
 pub mod demos;
 pub mod eval;
+pub mod idrex;
 pub mod noise;
 pub mod ppo;
 pub mod test_value;
@@ -31,10 +32,12 @@ pub mod trex;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use indicatif::ProgressStyle;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use super::idrex;
+pub use super::kind::StageKind;
+
 use crate::data::Trajectory;
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
@@ -46,23 +49,11 @@ pub const ROLLOUTS: &str = "rollouts.mcap";
 pub const POLICY: &str = "policy";
 pub const REWARD: &str = "reward";
 
-/// Declares the stage kinds once: the kind enum, the typed parameters and metrics of each,
-/// and the dispatch to its body, so that adding a kind is one line here plus its file.
+/// Declares each stage kind's typed parameters and metrics and the dispatch to its body, so
+/// that adding a kind is one line here, one in [`StageKind`], plus its file (the matches
+/// over `StageKind` are exhaustive: a kind missing here does not compile).
 macro_rules! stage_kinds {
-    ($($kind:ident = $name:literal: $params:ty => $metrics:ty, $body:path;)*) => {
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
-        pub enum StageKind {
-            $(#[serde(rename = $name)] $kind,)*
-        }
-
-        impl StageKind {
-            pub const ALL: &[StageKind] = &[$(StageKind::$kind,)*];
-
-            pub fn name(self) -> &'static str {
-                match self { $(StageKind::$kind => $name,)* }
-            }
-        }
-
+    ($($kind:ident: $params:ty => $metrics:ty, $body:path;)*) => {
         /// A node's parameters, typed per stage kind.
         #[derive(Debug, Clone, PartialEq)]
         pub enum Params {
@@ -110,18 +101,18 @@ macro_rules! stage_kinds {
 }
 
 stage_kinds! {
-    Demonstrator = "demonstrator": demos::DemonstratorParams => demos::DemonstratorMetrics, demos::demonstrator;
-    Demos = "demos": demos::DemosParams => RolloutSummary, demos::demos;
-    DemosImport = "demos-import": demos::ImportParams => RolloutSummary, demos::import;
-    Bc = "bc": bc::BcParams => crate::algo::bc::BcReport, bc::run;
-    NoiseRollouts = "noise-rollouts": noise::NoiseParams => noise::NoiseMetrics, noise::run;
-    Trex = "trex": trex::TrexParams => trex::TrexMetrics, trex::run;
-    Ppo = "ppo": ppo::PpoParams => ppo::PpoMetrics, ppo::run;
-    Eval = "eval": eval::EvalParams => eval::EvalMetrics, eval::run;
-    InterpolationRollouts = "interpolation-rollouts": idrex::interpolation::Params => DegradationMetrics, idrex::interpolation::run;
-    ActionNoiseRollouts = "action-noise-rollouts": idrex::action_noise::Params => DegradationMetrics, idrex::action_noise::run;
-    MultiBcRollouts = "multi-bc-rollouts": idrex::multi_bc::Params => idrex::multi_bc::Metrics, idrex::multi_bc::run;
-    TestValue = "test-value": test_value::Params => test_value::Metrics, test_value::run;
+    Demonstrator: demos::DemonstratorParams => demos::DemonstratorMetrics, demos::demonstrator;
+    Demos: demos::DemosParams => RolloutSummary, demos::demos;
+    DemosImport: demos::ImportParams => RolloutSummary, demos::import;
+    Bc: bc::BcParams => crate::algo::bc::BcReport, bc::run;
+    NoiseRollouts: noise::NoiseParams => noise::NoiseMetrics, noise::run;
+    Trex: trex::TrexParams => trex::TrexMetrics, trex::run;
+    Ppo: ppo::PpoParams => ppo::PpoMetrics, ppo::run;
+    Eval: eval::EvalParams => eval::EvalMetrics, eval::run;
+    InterpolationRollouts: idrex::interpolation::Params => DegradationMetrics, idrex::interpolation::run;
+    ActionNoiseRollouts: idrex::action_noise::Params => DegradationMetrics, idrex::action_noise::run;
+    MultiBcRollouts: idrex::multi_bc::Params => idrex::multi_bc::Metrics, idrex::multi_bc::run;
+    TestValue: test_value::Params => test_value::Metrics, test_value::run;
 }
 
 impl Params {
@@ -152,34 +143,6 @@ impl Params {
 
 fn parse<T: serde::de::DeserializeOwned>(kind: StageKind, what: &str, v: &Value) -> Result<T> {
     T::deserialize(v).map_err(|e| Error::Invalid(format!("stored {} {what} do not match this idrex version: {e}", kind.name())))
-}
-
-impl StageKind {
-    /// Bump when a change to the stage would change its results.
-    pub fn version(self) -> u32 {
-        match self {
-            // 2: trained on nn::dense (explicit gradients over MKL's sgemm) instead of
-            // libtorch's autograd, which sums in another order. 3: idrex's own products
-            // (nn::gemm) and initial weights (nn::init), the same bits on every processor.
-            StageKind::Bc | StageKind::Trex => 3,
-            // 4: clones from deterministic, mean-labelled source episodes with early
-            // stopping, fidelity measured, and a per-step filter.
-            StageKind::MultiBcRollouts => 4,
-            // 2: the networks' initial weights (PPO) and the learned reward's inference
-            // (PPO, evaluation) from idrex's own code instead of libtorch's.
-            StageKind::Demonstrator | StageKind::Ppo | StageKind::Eval => 2,
-            _ => 1,
-        }
-    }
-
-    /// Whether the stage uses more than one thread when granted them (`ctx.threads`).
-    pub fn parallel(self) -> bool {
-        matches!(self, StageKind::Bc | StageKind::Trex | StageKind::MultiBcRollouts)
-    }
-
-    pub fn parse(name: &str) -> Option<StageKind> {
-        StageKind::ALL.iter().copied().find(|k| k.name() == name)
-    }
 }
 
 /// A stored artifact read back through its stage's types.
@@ -297,11 +260,16 @@ pub struct DegradationMetrics {
 /// The progress callback PPO-based stages give [`crate::algo::ppo::train`].
 pub fn ppo_progress<'a>(ctx: &'a StageCtx<'a>, total: usize) -> impl FnMut(&crate::algo::ppo::PpoProgress) + 'a {
     ctx.progress.set_length(total as u64);
-    ctx.progress.set_style(crate::pipeline::runner::bar_style());
+    ctx.progress.set_style(bar_style());
     move |p| {
         ctx.progress.set_position(p.global_step as u64);
         if let Some(r) = p.episodic_return {
             ctx.progress.set_message(format!("true return {r:.0}"));
         }
     }
+}
+
+/// A running stage that knows its amount of work: a bar, percent and time left.
+pub fn bar_style() -> ProgressStyle {
+    ProgressStyle::with_template("  {spinner} {prefix:<30} {bar:20} {percent:>3}% eta {eta:>4} {wide_msg}").expect("template")
 }

@@ -1,10 +1,10 @@
 //! `noise-rollouts`: D-REX's automatically ranked data, epsilon-greedy rollouts of the BC
 //! policy at each level of the noise schedule (lower epsilon ranks higher).
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
+use crate::algo::noise;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::rollout;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -26,7 +26,7 @@ pub fn run(p: &NoiseParams, ctx: &StageCtx) -> Result<NoiseMetrics> {
     let policy = load_policy_for(ctx.input("policy")?, &env, p.env)?;
     ctx.progress.set_message("epsilon-greedy rollouts");
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
-    let trajs = rollout::epsilon_greedy(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta);
+    let trajs = noise::epsilon_greedy(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta);
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(NoiseMetrics { degradation: degradation(&trajs), returns: RolloutSummary::of(&trajs) })
 }

@@ -3,110 +3,17 @@
 //! reader; nothing decides on it).
 use std::path::Path;
 
-use crate::algo::bc::{self, BcConfig, BcReport, EarlyStopping};
+use crate::algo::bc::{self, BcReport};
 use crate::algo::ppo;
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
-use crate::nn::{ActorCritic, Device, WeightInit};
+use crate::nn::{ActorCritic, Device};
+use crate::pipeline::config::{CloneConfig, CloneLabels, SourceActing};
 use crate::pipeline::stage::load_policy_for;
 use crate::rollout::{self, Actor, PolicyActor, UniformActor};
 use crate::seed::{self, Purpose};
 use crate::stats::nan_as_null;
-
-/// Which policy of each source run a clone imitates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CloneSource {
-    /// The policy at the end of training.
-    #[default]
-    Final,
-    /// The checkpoint the ground-truth-free protocol chooses (the highest pessimistic
-    /// learned return, pooled over the runs). The original code cloned a checkpoint chosen
-    /// by hand.
-    Checkpoint,
-}
-
-/// How the source acts in the episodes a clone learns from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum SourceActing {
-    /// Sampling from its Gaussian, as PPO policies are evaluated (and as the original did).
-    Stochastic,
-    /// With its mean action.
-    #[default]
-    Deterministic,
-}
-
-/// What the clone regresses at each of the source's states.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CloneLabels {
-    /// The actions the source took (sampled, clipped to the box; the original code).
-    Sampled,
-    /// The source's mean action, clipped to the box: what the noise-free clone should do.
-    #[default]
-    Mean,
-}
-
-/// How multi-BC's clones are made (`idrex.multi_bc` in a pipeline file).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct CloneConfig {
-    pub source: CloneSource,
-    pub acting: SourceActing,
-    pub labels: CloneLabels,
-    /// Episodes of the source a clone trains on (the report: one trajectory).
-    pub episodes: usize,
-    /// Further source episodes held out for BC's validation loss and early stopping; 0
-    /// validates on `bc.val_fraction` of the training steps instead.
-    pub held_out_episodes: usize,
-    /// Feed the clone observations normalised with its source's statistics (and store them
-    /// with it), as the source saw them.
-    pub normalize: bool,
-    /// The clones' BC settings (separate from the demonstrations' `bc`).
-    pub bc: BcConfig,
-    /// Noise-free episodes of each clone, measured for fidelity and scored by the filter.
-    pub fidelity_episodes: usize,
-}
-
-impl Default for CloneConfig {
-    fn default() -> Self {
-        CloneConfig {
-            source: CloneSource::Final,
-            acting: SourceActing::Deterministic,
-            labels: CloneLabels::Mean,
-            episodes: 4,
-            held_out_episodes: 1,
-            normalize: true,
-            bc: BcConfig {
-                iterations: 20_000,
-                init: WeightInit::Normal002,
-                early_stopping: Some(EarlyStopping { every: 250, patience: 8 }),
-                ..BcConfig::default()
-            },
-            fidelity_episodes: 5,
-        }
-    }
-}
-
-impl CloneConfig {
-    /// Source episodes per clone, training and held out: their seeds are 100 apart per clone.
-    pub const MAX_EPISODES: usize = 100;
-
-    pub fn check(&self) -> std::result::Result<(), String> {
-        if self.episodes == 0 {
-            return Err("idrex.multi_bc.episodes is 0; a clone needs at least 1 source episode".into());
-        }
-        if self.episodes + self.held_out_episodes > Self::MAX_EPISODES {
-            return Err(format!("idrex.multi_bc.episodes + held_out_episodes is over {}; use fewer", Self::MAX_EPISODES));
-        }
-        if self.fidelity_episodes == 0 {
-            return Err("idrex.multi_bc.fidelity_episodes is 0; measure each clone on at least 1 episode".into());
-        }
-        Ok(())
-    }
-}
 
 /// How true a clone is to its source, on the ground truth (recorded for the reader only).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -8,12 +8,15 @@
 //!        iD-REX iteration k: rollouts from the iteration's policies ─> <variant>/k<k>/trex
 //!                             ─> <variant>/k<k>/ppo/<r> ─> <variant>/k<k>/eval/<r>
 //! ```
+pub mod idrex;
+
 use std::collections::BTreeMap;
 
-use super::config::{Method, Pipeline};
-use super::idrex::{self, DrexNodes, Variant};
+use super::Pipeline;
+use super::config::Method;
 use super::stage::{Params, StageKind, bc, demos, eval, noise, ppo, trex};
 use crate::store;
+use idrex::{DrexNodes, Variant};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct Node {

@@ -11,34 +11,19 @@
 //! learned reward per step ([`per_step_score`]), or keep every clone (the original code).
 use std::path::Path;
 
-use super::clone::{self, CloneConfig, CloneRecord, Fidelity};
+use super::clone::{self, CloneRecord, Fidelity};
+use crate::algo::noise;
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::nn::{Device, RewardEnsemble};
+use crate::pipeline::config::{CloneConfig, CloneFilter, CloneSource};
 use crate::pipeline::stage::{DegradationLevel, Metrics as AnyMetrics, REWARD, StageCtx, Typed, degradation, read_rollouts};
-use crate::rollout;
 use crate::seed::{self, Purpose};
 
 /// The file that keeps what the ranked set leaves out: every clone's source episodes, its
 /// noise-free fidelity episodes, and the rejected clones' rollouts.
 pub const CLONES: &str = "clones.mcap";
-
-/// Which clones join the ranked set.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum CloneFilter {
-    /// Every clone (the original code).
-    None,
-    /// Clones whose noise-free episodes score per step at least as high as the previous set's
-    /// least noisy rollouts under the previous iteration's reward: the reward the sources
-    /// were trained on, so on a task where PPO exploits it the filter is circular.
-    PreviousReward,
-    /// The same comparison under a judge: a reward trained on the previous iteration's ranked
-    /// sets from independent seeds, which no policy was trained on.
-    #[default]
-    HeldOutReward,
-}
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -118,7 +103,7 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
         }
     }
     let slices: Vec<&[_]> = runs.iter().map(Vec::as_slice).collect();
-    crate::report::select(&slices)
+    crate::pipeline::stage::eval::select(&slices)
         .without_ground_truth
         .ok_or_else(|| Error::Invalid("multi-BC's source is `checkpoint`, but the source runs have no learned checkpoint scores".into()))
 }
@@ -145,8 +130,8 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
         }
     }
     let source_step = match p.clone.source {
-        clone::CloneSource::Final => None,
-        clone::CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered("eval"))?),
+        CloneSource::Final => None,
+        CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered("eval"))?),
     };
     let random_return = clone::random_return(&mut env, p.clone.fidelity_episodes, ctx.seed);
     let (mut kept, mut extra, mut clones) = (Vec::new(), Vec::new(), Vec::new());
@@ -155,7 +140,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
         let made = clone::make(&mut env, dir, source_step, &p.clone, p.env, ctx.seed, r, ctx.threads, p.device)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r as u64);
-        let trajs = rollout::epsilon_greedy(&mut env, &made.policy, &p.schedule, p.rollouts_per_level, seed, &meta);
+        let trajs = noise::epsilon_greedy(&mut env, &made.policy, &p.schedule, p.rollouts_per_level, seed, &meta);
         let score_under = |(reward, scale): &(RewardEnsemble, Vec<f64>)| {
             baseline.as_ref().map(|(_, base)| per_step_score(reward, scale, &made.fidelity_episodes, base))
         };

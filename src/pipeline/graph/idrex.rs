@@ -2,16 +2,13 @@
 //! iteration's RL policies, learn a reward on every ranked set so far, and train new RL
 //! policies on it. The three variants differ only in how the new set is made:
 //! [`interpolation`] (variant 1), [`action_noise`] (variant 2) and [`multi_bc`] (variant 3).
-//! This module holds their rollout stages and the expansion of the iterations into the DAG.
-pub mod action_noise;
-pub mod clone;
-pub mod interpolation;
-pub mod multi_bc;
-
-use super::config::{Method, Pipeline};
-use super::graph::{Graph, io, rl_runs, trex_params};
-use super::stage::{Params, trex::RankedSet};
-use multi_bc::CloneFilter;
+//! Their rollout stages are in [`crate::pipeline::stage::idrex`]; this module expands the
+//! iterations into the DAG.
+use super::{Graph, io, rl_runs, trex_params};
+use crate::pipeline::Pipeline;
+use crate::pipeline::config::{CloneFilter, CloneSource, Method};
+use crate::pipeline::stage::idrex::{action_noise, interpolation, multi_bc};
+use crate::pipeline::stage::{Params, trex::RankedSet};
 
 /// The three ways iD-REX makes a new ranked set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -95,7 +92,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                     let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
                     inputs.push(io("judge", &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
                 }
-                if s.idrex.multi_bc.source == clone::CloneSource::Checkpoint {
+                if s.idrex.multi_bc.source == CloneSource::Checkpoint {
                     inputs.extend(current.iter().enumerate().map(|(r, n)| io(&format!("eval{r}"), &eval_of(n))));
                 }
                 Params::MultiBcRollouts(multi_bc::Params {
@@ -124,6 +121,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
 mod tests {
     use super::*;
     use crate::pipeline::expand;
+    use crate::pipeline::stage::idrex::clone;
 
     fn graph(extra: &str) -> Graph {
         let text = format!("version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nmethods: [drex, idrex-multi-bc]\n{extra}");

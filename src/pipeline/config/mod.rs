@@ -1,0 +1,310 @@
+//! Pipeline files' schema, version 1: the structs a YAML file deserialises into, each field
+//! documented here once (`docs/pipelines.md` is checked against them). Reading and checking
+//! a file is [`crate::pipeline::load`].
+mod idrex;
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
+use crate::env::EnvId;
+use crate::nn::DeviceChoice;
+use crate::nn::reward::{Combine, CtrlAction, RewardLevel};
+pub use idrex::{CloneConfig, CloneFilter, CloneLabels, CloneSource, IdrexConfig, SourceActing};
+
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// The methods a pipeline can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    Bc,
+    Drex,
+    IdrexInterpolation,
+    IdrexActionNoise,
+    IdrexMultiBc,
+}
+
+impl Method {
+    pub const ALL: [Method; 5] = [Method::Bc, Method::Drex, Method::IdrexInterpolation, Method::IdrexActionNoise, Method::IdrexMultiBc];
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Bc => "bc",
+            Method::Drex => "drex",
+            Method::IdrexInterpolation => "idrex-interpolation",
+            Method::IdrexActionNoise => "idrex-action-noise",
+            Method::IdrexMultiBc => "idrex-multi-bc",
+        }
+    }
+
+    /// The paper's column heading.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::Bc => "BC",
+            Method::Drex => "D-REX",
+            Method::IdrexInterpolation => "iD-REX interp.",
+            Method::IdrexActionNoise => "iD-REX action noise",
+            Method::IdrexMultiBc => "iD-REX multi-BC",
+        }
+    }
+
+    /// Its colour (RGB), the same in every figure and recording.
+    pub fn colour(self) -> [u8; 3] {
+        match self {
+            Method::Bc => [127, 127, 127],
+            Method::Drex => [31, 119, 180],
+            Method::IdrexInterpolation => [255, 127, 14],
+            Method::IdrexActionNoise => [44, 160, 44],
+            Method::IdrexMultiBc => [214, 39, 40],
+        }
+    }
+
+    /// The method whose stages a graph node belongs to (`r2/drex/ppo/0` -> D-REX).
+    pub fn of_node(node: &str) -> Option<Method> {
+        node.split('/').find_map(|part| Method::ALL.into_iter().find(|m| m.name() == part))
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DemonstratorConfig {
+    /// PPO steps on the ground-truth reward (stopped early at target_return).
+    pub steps: usize,
+    /// Stop once an evaluation reaches this mean return, so the demonstrator stays mediocre.
+    pub target_return: Option<f64>,
+    /// Evaluate (5 episodes) every this many steps to check the target.
+    pub eval_every: usize,
+}
+
+impl Default for DemonstratorConfig {
+    fn default() -> Self {
+        DemonstratorConfig { steps: 200_000, target_return: None, eval_every: 20_480 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DemosConfig {
+    /// Rollouts of the demonstrator's stochastic policy.
+    pub episodes: usize,
+    /// Import instead: an MCAP in idrex's rollout schema or an NPZ with obs, actions,
+    /// rewards, episode_lengths; a path relative to the pipeline file, or (for a study over
+    /// several environments) a map from environment to path.
+    pub from: Option<DemosFrom>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum DemosFrom {
+    One(PathBuf),
+    PerEnv(BTreeMap<String, PathBuf>),
+}
+
+impl DemosFrom {
+    /// The file for `env`, relative to the pipeline file.
+    pub fn for_env(&self, env: EnvId) -> Option<&PathBuf> {
+        match self {
+            DemosFrom::One(p) => Some(p),
+            DemosFrom::PerEnv(m) => m.get(env.name()),
+        }
+    }
+}
+
+/// One environment, or a list: a study over several, each expanded with every method and seed.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(untagged)]
+pub enum Envs {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl Envs {
+    pub fn names(&self) -> Vec<&str> {
+        match self {
+            Envs::One(e) => vec![e.as_str()],
+            Envs::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
+}
+
+impl Default for DemosConfig {
+    fn default() -> Self {
+        DemosConfig { episodes: 1, from: None }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    /// Epsilon levels of the D-REX epsilon-greedy schedule.
+    pub schedule: Vec<f64>,
+    pub rollouts_per_level: usize,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvalConfig {
+    pub episodes: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        EvalConfig { episodes: 20 }
+    }
+}
+
+/// How PPO's reward is composed from the learned ensemble ([`Composition`]).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardSettings {
+    /// Control-cost coefficient subtracted from the learned reward (default per environment:
+    /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d).
+    pub ctrl_coeff: Option<f64>,
+    /// mean, last-over-count (the original code), or min (pessimistic).
+    pub combine: Combine,
+    /// raw (the original code; the default), or clipped.
+    pub ctrl_action: CtrlAction,
+    /// Where each member is centred and scaled for RL: running (PPO's own experience; the
+    /// original code and the default) or ranked-floor (fixed from D-REX's ranked set).
+    pub level: RewardLevel,
+    /// k in mean - k x the members' spread, a brake on exploitation (0: none, the default).
+    pub disagreement: f64,
+}
+
+/// Per-method overrides of the shared stage parameters (any subset of their fields).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MethodOverrides {
+    pub trex: Option<serde_json::Value>,
+    pub ppo: Option<serde_json::Value>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineFile {
+    /// Schema version; must be 1.
+    pub version: u32,
+    /// Names the pipeline in reports (default: the file name).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// An environment, or a list of them (a study).
+    pub env: Envs,
+    /// Store directory, relative to the pipeline file (default: ./artifacts of the cwd), or
+    /// an S3 URL `s3://bucket/prefix`.
+    #[serde(default)]
+    pub store: Option<String>,
+    /// One RL run per seed (R = len).
+    #[serde(default = "default_seeds")]
+    pub seeds: Vec<u64>,
+    /// Independent replicates of the whole pipeline, each with its own seeds for every stage
+    /// ([`replicate_seed`]); a whole number from 1 to [`MAX_REPLICATES`] (default 1).
+    #[serde(default)]
+    pub replicates: Option<f64>,
+    /// The index of this file's first replicate (default 0): files that share a `name` and
+    /// split one study give disjoint ranges.
+    #[serde(default)]
+    pub first_replicate: Option<f64>,
+    #[serde(default = "default_methods")]
+    pub methods: Vec<Method>,
+    /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting).
+    #[serde(default = "default_iterations")]
+    pub iterations: usize,
+    #[serde(default)]
+    pub demonstrator: DemonstratorConfig,
+    #[serde(default)]
+    pub demos: DemosConfig,
+    #[serde(default)]
+    pub bc: BcConfig,
+    #[serde(default)]
+    pub noise: NoiseConfig,
+    #[serde(default)]
+    pub trex: TrexConfig,
+    #[serde(default)]
+    pub reward: RewardSettings,
+    #[serde(default)]
+    pub ppo: PpoConfig,
+    #[serde(default)]
+    pub eval: EvalConfig,
+    #[serde(default)]
+    pub idrex: IdrexConfig,
+    #[serde(default)]
+    pub overrides: BTreeMap<Method, MethodOverrides>,
+    /// What each stage asks Slurm for (`--executor slurm`); not part of any key.
+    #[serde(default)]
+    pub slurm: SlurmConfig,
+    /// Where BC, T-REX and PPO's learned reward compute: `auto` (the GPU where libtorch
+    /// sees one), `cpu` or `cuda`. A GPU stage has `device: cuda` in its key.
+    #[serde(default)]
+    pub device: DeviceChoice,
+}
+
+/// A Slurm job's resources; unset fields fall back to `slurm.default`, then to the
+/// cluster's defaults.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Resources {
+    /// `--cpus-per-task`; also the stage's thread budget.
+    pub cpus: Option<u32>,
+    /// `--mem`, e.g. `4G`.
+    pub mem: Option<String>,
+    /// `--time`, e.g. `2:00:00`.
+    pub time: Option<String>,
+    /// `--gres=gpu:N`.
+    pub gpus: Option<u32>,
+}
+
+impl Resources {
+    /// `self`, with `base` filling what it leaves unset.
+    pub fn or(&self, base: &Resources) -> Resources {
+        Resources {
+            cpus: self.cpus.or(base.cpus),
+            mem: self.mem.clone().or_else(|| base.mem.clone()),
+            time: self.time.clone().or_else(|| base.time.clone()),
+            gpus: self.gpus.or(base.gpus),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SlurmConfig {
+    pub default: Resources,
+    /// Per stage kind (`trex`, `ppo`, `bc`, `eval`, `noise-rollouts`, ...).
+    pub stages: BTreeMap<crate::pipeline::kind::StageKind, Resources>,
+}
+
+impl SlurmConfig {
+    pub fn for_kind(&self, kind: crate::pipeline::kind::StageKind) -> Resources {
+        self.stages.get(&kind).map_or_else(|| self.default.clone(), |r| r.or(&self.default))
+    }
+}
+
+/// The most replicates one file may ask for.
+pub const MAX_REPLICATES: usize = 1000;
+
+/// Seeds of replicate `r` are the file's seeds plus `r` times this: far beyond every offset
+/// [`crate::seed::derive`] adds to a stage seed, so no replicate's streams meet another's.
+pub const REPLICATE_STRIDE: u64 = 1_000_000_007;
+
+/// The seed a stage of replicate `r` uses in place of the file's `seed`. Replicate 0 keeps
+/// the file's seeds, so a file without replicates is its own replicate 0, and raising the
+/// count reuses every stored replicate.
+pub fn replicate_seed(seed: u64, r: usize) -> u64 {
+    seed.wrapping_add(REPLICATE_STRIDE.wrapping_mul(r as u64))
+}
+
+fn default_seeds() -> Vec<u64> {
+    vec![0, 1, 2]
+}
+fn default_methods() -> Vec<Method> {
+    Method::ALL.to_vec()
+}
+fn default_iterations() -> usize {
+    2
+}

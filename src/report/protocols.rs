@@ -1,0 +1,176 @@
+//! The three protocols ([`Protocol`]) a PPO method's return is reported under: which policy
+//! of each run is measured, each cell with its bootstrap interval over runs; their markdown
+//! tables and CSV.
+use polars::prelude::*;
+
+use super::{Table, num, pe};
+use crate::error::Result;
+use crate::pipeline::Method;
+use crate::pipeline::stage::eval::{CheckpointEval, select};
+use crate::stats::{ReturnStats, bootstrap_ci};
+
+/// Which policy of each PPO run a figure is measured on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Protocol {
+    /// The policy at the end of training.
+    Final,
+    /// The checkpoint whose true return, pooled over the runs, is highest: the paper's
+    /// protocol (and the original D-REX code's), a choice made with the ground truth.
+    BestByGroundTruth,
+    /// The checkpoint whose pessimistic learned return (the ensemble's most pessimistic
+    /// member, in units of the demonstrations), pooled over the runs, is highest: a choice a
+    /// user without the true reward can make.
+    GroundTruthFree,
+}
+
+impl Protocol {
+    pub const ALL: [Protocol; 3] = [Protocol::Final, Protocol::BestByGroundTruth, Protocol::GroundTruthFree];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::Final => "final",
+            Protocol::BestByGroundTruth => "best-by-ground-truth",
+            Protocol::GroundTruthFree => "ground-truth-free",
+        }
+    }
+
+    pub(super) fn title(self) -> &'static str {
+        match self {
+            Protocol::Final => "final policy",
+            Protocol::BestByGroundTruth => "best checkpoint, SELECTED WITH THE GROUND-TRUTH REWARD (the paper's protocol)",
+            Protocol::GroundTruthFree => "checkpoint chosen without the ground truth (highest pessimistic learned return)",
+        }
+    }
+}
+
+/// Bootstrap resamples for the confidence intervals.
+pub(super) const RESAMPLES: usize = 10_000;
+
+/// One evaluated run: its final policy's returns and its checkpoints.
+pub(super) struct RunEval {
+    pub run: usize,
+    pub final_returns: Vec<f64>,
+    pub checkpoints: Vec<CheckpointEval>,
+}
+
+/// One cell of a protocol table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProtocolRow {
+    pub env: String,
+    /// The table: the pipeline's name, with the replicate past the first (`study/r3`).
+    pub pipeline: String,
+    /// The pipeline's name (a study's, across the files and replicates that share it).
+    pub study: String,
+    pub replicate: usize,
+    /// Each run's mean return at the chosen policy, in run order.
+    pub run_means: Vec<f64>,
+    pub method: String,
+    pub protocol: Protocol,
+    /// The chosen checkpoint's global step (None for the final policy or without checkpoints).
+    pub step: Option<usize>,
+    pub stats: ReturnStats,
+    pub runs: usize,
+    pub ci: (f64, f64),
+    /// Best-by-ground-truth mean minus this one (ground-truth-free rows only).
+    pub gap_to_best: Option<f64>,
+}
+
+/// The three protocols' rows of one (env, pipeline, method).
+pub(super) fn protocol_rows(env: &str, table: &Table, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
+    let row = |protocol, step: Option<usize>, per_run: Vec<Vec<f64>>| {
+        let pooled: Vec<f64> = per_run.iter().flatten().copied().collect();
+        let run_means: Vec<f64> = per_run.iter().map(|r| ReturnStats::of(r).mean).collect();
+        ProtocolRow {
+            env: env.into(),
+            pipeline: table.label.clone(),
+            study: table.study.clone(),
+            replicate: table.replicate,
+            method: method.into(),
+            protocol,
+            step,
+            stats: ReturnStats::of(&pooled),
+            runs: runs.len(),
+            ci: bootstrap_ci(&run_means, RESAMPLES, 0),
+            run_means,
+            gap_to_best: None,
+        }
+    };
+    let at_step = |step: usize| {
+        runs.iter().map(|r| r.checkpoints.iter().find(|c| c.step == step).expect("a chosen step").returns.clone()).collect::<Vec<_>>()
+    };
+    let final_row = row(Protocol::Final, None, runs.iter().map(|r| r.final_returns.clone()).collect());
+    let chosen = select(&runs.iter().map(|r| r.checkpoints.as_slice()).collect::<Vec<_>>());
+    let (best, free) = (chosen.by_ground_truth, chosen.without_ground_truth);
+    let mut out = vec![final_row.clone()];
+    let best_row = match best {
+        Some(s) => row(Protocol::BestByGroundTruth, Some(s), at_step(s)),
+        // Without checkpoints (BC) the final policy is the only candidate.
+        None => ProtocolRow { protocol: Protocol::BestByGroundTruth, ..final_row.clone() },
+    };
+    let mut free_row = match (free, best) {
+        (Some(s), _) => row(Protocol::GroundTruthFree, Some(s), at_step(s)),
+        (None, None) => ProtocolRow { protocol: Protocol::GroundTruthFree, ..final_row.clone() },
+        // Checkpoints without learned scores: nothing to choose with.
+        (None, Some(_)) => return vec![final_row, best_row],
+    };
+    if free.is_some() {
+        free_row.gap_to_best = Some(best_row.stats.mean - free_row.stats.mean);
+    }
+    out.push(best_row);
+    out.push(free_row);
+    out
+}
+
+/// One table per protocol, in the paper's layout; each cell: mean ± std over runs x
+/// episodes, the 95 % bootstrap interval of the mean over runs, the checkpoint's step.
+pub(super) fn protocols_markdown(rows: &[ProtocolRow]) -> String {
+    let mut out = String::from(
+        "\n## Three protocols (mean ± std over runs x episodes [95 % bootstrap CI of the mean over runs] @ checkpoint step)\n",
+    );
+    let mut groups: Vec<(&str, &str)> = rows.iter().map(|r| (r.env.as_str(), r.pipeline.as_str())).collect();
+    groups.dedup();
+    for protocol in Protocol::ALL {
+        out.push_str(&format!(
+            "\n### {}\n\n| env | pipeline | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|\n",
+            protocol.title()
+        ));
+        for (env, pipeline) in &groups {
+            out.push_str(&format!("| {env} | {pipeline} |"));
+            for m in Method::ALL {
+                let cell = rows.iter().find(|r| r.env == *env && r.pipeline == *pipeline && r.method == m.name() && r.protocol == protocol);
+                out.push_str(&match cell {
+                    None => " missing |".to_string(),
+                    Some(r) => {
+                        let step = r.step.map_or(String::new(), |s| format!(" @{s}"));
+                        let gap = r.gap_to_best.map_or(String::new(), |g| format!("; {} below the best", num(Some(g))));
+                        let [mean, std, lo, hi] = [r.stats.mean, r.stats.std, r.ci.0, r.ci.1].map(|x| num(Some(x)));
+                        format!(" {mean} ± {std} [{lo}, {hi}]{step}{gap} |")
+                    }
+                });
+            }
+            out.push('\n');
+        }
+    }
+    out
+}
+
+/// The protocol rows as a table (`protocols.csv`).
+pub fn protocols_frame(rows: &[ProtocolRow]) -> Result<DataFrame> {
+    let s = |f: &dyn Fn(&ProtocolRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
+    let x = |f: &dyn Fn(&ProtocolRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    DataFrame::new_infer_height(vec![
+        Column::new("env".into(), s(&|r| r.env.clone())),
+        Column::new("pipeline".into(), s(&|r| r.pipeline.clone())),
+        Column::new("method".into(), s(&|r| r.method.clone())),
+        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
+        Column::new("step".into(), rows.iter().map(|r| r.step.map(|v| v as u64)).collect::<Vec<_>>()),
+        Column::new("mean".into(), x(&|r| r.stats.mean)),
+        Column::new("std".into(), x(&|r| r.stats.std)),
+        Column::new("episodes".into(), rows.iter().map(|r| r.stats.episodes as u64).collect::<Vec<_>>()),
+        Column::new("runs".into(), rows.iter().map(|r| r.runs as u64).collect::<Vec<_>>()),
+        Column::new("ci_low".into(), x(&|r| r.ci.0)),
+        Column::new("ci_high".into(), x(&|r| r.ci.1)),
+        Column::new("gap_to_best".into(), rows.iter().map(|r| r.gap_to_best).collect::<Vec<_>>()),
+    ])
+    .map_err(pe)
+}
