@@ -12,13 +12,16 @@ use crate::error::{Error, Result};
 use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
 use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct BcConfig {
     /// Hidden layer sizes (D-REX: 4 x 256, ReLU).
     pub hidden: Vec<usize>,
+    /// Adam learning rate.
     pub lr: f64,
+    /// Steps per minibatch.
     pub batch_size: usize,
+    /// Minibatch updates (at most, with early stopping).
     pub iterations: usize,
     /// Weight of the sum of squared weights.
     pub l2: f64,
@@ -34,10 +37,12 @@ pub struct BcConfig {
 
 /// Early stopping on the validation loss: measured every `every` iterations, training
 /// stops after `patience` measurements without a new best, and the best weights are kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EarlyStopping {
+    /// Iterations between validation measurements.
     pub every: usize,
+    /// Measurements without a new best validation loss before training stops.
     pub patience: usize,
 }
 

@@ -13,7 +13,7 @@ use crate::nn::ActorCritic;
 use crate::rollout::{self, Actor, PolicyActor, UniformActor};
 
 /// The noise processes iD-REX's action-noise variant can inject (`idrex.action_noise`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum NoiseProcess {
     /// Independent Gaussian noise every step.

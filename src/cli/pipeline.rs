@@ -19,6 +19,21 @@ pub enum PipelineCommand {
     Plan(PlanArgs),
     /// Each node's state: stored, queued, running (from Slurm's queue), failed or missing.
     Status(PlanArgs),
+    /// Print the pipeline file's schema: JSON Schema (for editors that check YAML) or the
+    /// reference table of docs/schema.md.
+    Schema(SchemaArgs),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SchemaFormat {
+    Json,
+    Markdown,
+}
+
+#[derive(Debug, Args)]
+pub struct SchemaArgs {
+    #[arg(long, value_enum, default_value_t = SchemaFormat::Json)]
+    pub format: SchemaFormat,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -79,6 +94,14 @@ pub fn run(cmd: &PipelineCommand) -> anyhow::Result<()> {
         PipelineCommand::Run(args) => pipeline_run(args),
         PipelineCommand::Plan(args) => plan(args),
         PipelineCommand::Status(args) => status(args),
+        PipelineCommand::Schema(args) => {
+            use crate::pipeline::config::schema;
+            match args.format {
+                SchemaFormat::Json => println!("{}", serde_json::to_string_pretty(&schema::json())?),
+                SchemaFormat::Markdown => print!("{}", schema::markdown()),
+            }
+            Ok(())
+        }
     }
 }
 

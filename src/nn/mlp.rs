@@ -34,7 +34,7 @@ pub enum Init {
 }
 
 /// The initialisation a pipeline file can choose for the BC and reward networks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub enum WeightInit {
     /// libtorch's default (Kaiming-uniform weights, uniform biases).
     #[default]

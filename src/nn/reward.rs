@@ -42,7 +42,7 @@ impl RewardConfig {
 }
 
 /// How the ensemble's normalised outputs combine into one reward.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Combine {
     /// The mean of the models' normalised outputs.
@@ -56,7 +56,7 @@ pub enum Combine {
 }
 
 /// Which action the control cost is charged on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CtrlAction {
     /// The action sent to the environment, clipped to the box.
@@ -69,7 +69,7 @@ pub enum CtrlAction {
 }
 
 /// Where each member's reward is centred and scaled for RL.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum RewardLevel {
     /// By running statistics of PPO's own experience (the original code): the learned reward

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 macro_rules! kinds {
     ($($kind:ident = $name:literal,)*) => {
-        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, schemars::JsonSchema)]
         pub enum StageKind {
             $(#[serde(rename = $name)] $kind,)*
         }

@@ -33,37 +33,53 @@ use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
 use crate::stats::ReturnStats;
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PpoConfig {
     /// Total environment steps.
     pub total_steps: usize,
+    /// Environments stepped in parallel (one vector of them).
     pub num_envs: usize,
     /// Steps per environment per rollout.
     pub num_steps: usize,
+    /// Minibatches per update epoch (the rollout is split into this many).
     pub num_minibatches: usize,
+    /// Passes over each rollout per update.
     pub update_epochs: usize,
+    /// Adam learning rate.
     pub lr: f64,
+    /// Anneal the learning rate linearly to 0 over the run.
     pub anneal_lr: bool,
+    /// Discount factor.
     pub gamma: f64,
+    /// Lambda of generalised advantage estimation.
     pub gae_lambda: f64,
+    /// Clip range of the surrogate objective (and of the value loss with `clip_vloss`).
     pub clip_coef: f64,
+    /// Clip the value loss around the old values, as CleanRL.
     pub clip_vloss: bool,
+    /// Weight of the entropy bonus.
     pub ent_coef: f64,
+    /// Weight of the value loss.
     pub vf_coef: f64,
+    /// Gradient-norm clip of each minibatch update.
     pub max_grad_norm: f64,
+    /// Normalise advantages per minibatch.
     pub norm_adv: bool,
     /// Clip of normalised observations and of scaled rewards.
     pub obs_clip: f64,
+    /// Clip of the return-scaled reward.
     pub reward_clip: f64,
+    /// Hidden layer sizes of the policy and value networks (tanh).
     pub hidden: Vec<usize>,
     /// Threads for stepping the environments (libtorch runs single-threaded in stages).
     pub threads: usize,
     /// Evaluate (stochastic policy, ground-truth reward) every this many steps; 0: never.
     pub eval_every: usize,
+    /// Episodes per evaluation (`eval_every`).
     pub eval_episodes: usize,
-    /// Where the minibatch updates run: `fused` (plain Rust, see ppo_fused.rs) or `tch`
-    /// (libtorch autograd). Both compute the same loss; fused is several times faster.
+    /// Where the minibatch updates run: `fused` (plain Rust, `algo/ppo/fused.rs`); `tch`
+    /// (libtorch's autograd) is the tests' reference, refused in pipeline files.
     pub backend: Backend,
     /// Keep a checkpoint of the policy after the first update and every this many updates
     /// (0: none), as the original D-REX code (baselines' ppo2) did before evaluating each.
@@ -74,7 +90,7 @@ pub struct PpoConfig {
     pub bootstrap_truncation: bool,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     Fused,

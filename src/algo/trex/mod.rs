@@ -20,11 +20,14 @@ use crate::seed::{self, Purpose};
 mod torch;
 pub(crate) use torch::train_torch;
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TrexConfig {
+    /// Hidden layer sizes of each reward network (ReLU).
     pub hidden: Vec<usize>,
+    /// Members of the ensemble, each trained on its own pairs and seed.
     pub models: usize,
+    /// Training pairs sampled per member (the validation pairs among them).
     pub pairs_per_model: usize,
     /// Window length in steps (shortened to the shorter trajectory where needed).
     pub window: usize,
@@ -32,10 +35,15 @@ pub struct TrexConfig {
     pub min_margin: f64,
     /// Pair only trajectories of the same group (multi-BC ranks within one clone).
     pub same_group: bool,
+    /// Adam learning rate.
     pub lr: f64,
+    /// Pairs per minibatch.
     pub batch_size: usize,
+    /// Minibatch updates per member.
     pub iterations: usize,
+    /// Weight of the sum of squared weights.
     pub l2: f64,
+    /// Fraction of the pairs held out for validation accuracy.
     pub val_fraction: f64,
     /// Feed the action to the reward net too.
     pub action_input: bool,

@@ -3,7 +3,7 @@ use crate::algo::bc::{BcConfig, EarlyStopping};
 use crate::algo::noise::NoiseProcess;
 use crate::nn::WeightInit;
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct IdrexConfig {
     /// Variant 1: action-selection probabilities alpha of the newer policy.
@@ -14,8 +14,9 @@ pub struct IdrexConfig {
     pub action_noise: NoiseProcess,
     /// Variants 1 and 2: rollouts per level and per source policy.
     pub rollouts_per_level: usize,
-    /// Variant 3: epsilon schedule for the clones and rollouts per level (1 in the original).
+    /// Variant 3: epsilon schedule for the clones.
     pub multi_bc_schedule: Vec<f64>,
+    /// Variant 3: epsilon-greedy rollouts of each clone per level (1 in the original).
     pub multi_bc_rollouts_per_level: usize,
     /// Variant 3: how the clones are made.
     pub multi_bc: CloneConfig,
@@ -40,7 +41,7 @@ impl Default for IdrexConfig {
 }
 
 /// Which policy of each source run a clone imitates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CloneSource {
     /// The policy at the end of training.
@@ -53,7 +54,7 @@ pub enum CloneSource {
 }
 
 /// How the source acts in the episodes a clone learns from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum SourceActing {
     /// Sampling from its Gaussian, as PPO policies are evaluated (and as the original did).
@@ -64,7 +65,7 @@ pub enum SourceActing {
 }
 
 /// What the clone regresses at each of the source's states.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CloneLabels {
     /// The actions the source took (sampled, clipped to the box; the original code).
@@ -75,7 +76,7 @@ pub enum CloneLabels {
 }
 
 /// How multi-BC's clones are made (`idrex.multi_bc` in a pipeline file).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct CloneConfig {
     pub source: CloneSource,
@@ -89,7 +90,8 @@ pub struct CloneConfig {
     /// Feed the clone observations normalised with its source's statistics (and store them
     /// with it), as the source saw them.
     pub normalize: bool,
-    /// The clones' BC settings (separate from the demonstrations' `bc`).
+    /// The clones' BC settings (separate from the demonstrations' `bc`); given, it replaces
+    /// the whole default.
     pub bc: BcConfig,
     /// Noise-free episodes of each clone, measured for fidelity and scored by the filter.
     pub fidelity_episodes: usize,
@@ -134,7 +136,7 @@ impl CloneConfig {
 }
 
 /// Which clones join the ranked set.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CloneFilter {
     /// Every clone (the original code).

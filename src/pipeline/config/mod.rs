@@ -2,6 +2,7 @@
 //! documented here once (`docs/pipelines.md` is checked against them). Reading and checking
 //! a file is [`crate::pipeline::load`].
 mod idrex;
+pub mod schema;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -15,7 +16,7 @@ pub use idrex::{CloneConfig, CloneFilter, CloneLabels, CloneSource, IdrexConfig,
 pub const SCHEMA_VERSION: u32 = 1;
 
 /// The methods a pipeline can run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
     Bc,
@@ -65,7 +66,7 @@ impl Method {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DemonstratorConfig {
     /// PPO steps on the ground-truth reward (stopped early at target_return).
@@ -82,7 +83,7 @@ impl Default for DemonstratorConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DemosConfig {
     /// Rollouts of the demonstrator's stochastic policy.
@@ -93,7 +94,7 @@ pub struct DemosConfig {
     pub from: Option<DemosFrom>,
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum DemosFrom {
     One(PathBuf),
@@ -111,7 +112,7 @@ impl DemosFrom {
 }
 
 /// One environment, or a list: a study over several, each expanded with every method and seed.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum Envs {
     One(String),
@@ -133,11 +134,12 @@ impl Default for DemosConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct NoiseConfig {
     /// Epsilon levels of the D-REX epsilon-greedy schedule.
     pub schedule: Vec<f64>,
+    /// Epsilon-greedy rollouts of BC per level.
     pub rollouts_per_level: usize,
 }
 
@@ -147,9 +149,11 @@ impl Default for NoiseConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EvalConfig {
+    /// Episodes per policy and per checkpoint (ground-truth reward, stochastic PPO
+    /// policies; BC acts with its mean).
     pub episodes: usize,
 }
 
@@ -160,7 +164,7 @@ impl Default for EvalConfig {
 }
 
 /// How PPO's reward is composed from the learned ensemble ([`Composition`]).
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RewardSettings {
     /// Control-cost coefficient subtracted from the learned reward (default per environment:
@@ -178,14 +182,16 @@ pub struct RewardSettings {
 }
 
 /// Per-method overrides of the shared stage parameters (any subset of their fields).
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct MethodOverrides {
+    /// Any subset of `trex`'s fields, for this method's rewards.
     pub trex: Option<serde_json::Value>,
+    /// Any subset of `ppo`'s fields, for this method's RL runs.
     pub ppo: Option<serde_json::Value>,
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PipelineFile {
     /// Schema version; must be 1.
@@ -210,6 +216,7 @@ pub struct PipelineFile {
     /// split one study give disjoint ranges.
     #[serde(default)]
     pub first_replicate: Option<f64>,
+    /// The methods to run and report.
     #[serde(default = "default_methods")]
     pub methods: Vec<Method>,
     /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting).
@@ -233,6 +240,7 @@ pub struct PipelineFile {
     pub eval: EvalConfig,
     #[serde(default)]
     pub idrex: IdrexConfig,
+    /// Per method, fields of `trex` and `ppo` that differ from the shared ones.
     #[serde(default)]
     pub overrides: BTreeMap<Method, MethodOverrides>,
     /// What each stage asks Slurm for (`--executor slurm`); not part of any key.
@@ -246,7 +254,7 @@ pub struct PipelineFile {
 
 /// A Slurm job's resources; unset fields fall back to `slurm.default`, then to the
 /// cluster's defaults.
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct Resources {
     /// `--cpus-per-task`; also the stage's thread budget.
@@ -271,7 +279,7 @@ impl Resources {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SlurmConfig {
     pub default: Resources,
