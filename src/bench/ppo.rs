@@ -55,6 +55,7 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
                 ctrl_action: CtrlAction::Raw,
                 level: Default::default(),
                 disagreement: 0.0,
+                ceiling: None,
             },
         }
     };

@@ -104,6 +104,11 @@ pub struct Composition {
     /// Absent from the key at 0.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub disagreement: f64,
+    /// A brake on exploitation: each member's raw reward per step is capped at this quantile
+    /// of its values over D-REX's ranked set, so no state pays more than the ranking has
+    /// seen. Absent (no cap) from the key when unset.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ceiling: Option<f64>,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -127,6 +132,10 @@ pub struct RewardEnsemble {
     pub norms: Vec<RunningMeanStd>,
     /// Whether `norms` are fixed ([`RewardLevel::RankedFloor`]): RL then never updates them.
     pub fixed_norms: bool,
+    /// Each member's cap on its raw reward ([`Composition::ceiling`]), where set.
+    pub ceilings: Option<Vec<f32>>,
+    /// Steps RL trained on and, of those, members' values the ceiling capped.
+    pub capped: (u64, u64),
 }
 
 impl RewardEnsemble {
@@ -140,7 +149,7 @@ impl RewardEnsemble {
             .map(|(m, vs)| Mlp::new(&(vs.root() / format!("m{m}")), &sizes, Activation::Relu, config.init.init()))
             .collect();
         let norms = (0..config.models).map(|_| RunningMeanStd::new(1)).collect();
-        RewardEnsemble { stores, nets, config, norms, fixed_norms: false }
+        RewardEnsemble { stores, nets, config, norms, fixed_norms: false, ceilings: None, capped: (0, 0) }
     }
 
     /// Moves the networks to `device`, where [`RewardEnsemble::raw`] then computes (PPO's
@@ -219,7 +228,20 @@ impl RewardEnsemble {
         comp: &Composition,
         update: bool,
     ) -> Vec<f64> {
-        let raw = self.raw(next_obs, actions);
+        let mut raw = self.raw(next_obs, actions);
+        if let Some(ceilings) = &self.ceilings {
+            for (r, &c) in raw.iter_mut().zip(ceilings) {
+                for x in r.iter_mut().filter(|x| **x > c) {
+                    *x = c;
+                    if update {
+                        self.capped.1 += 1;
+                    }
+                }
+            }
+        }
+        if update {
+            self.capped.0 += (raw[0].len() * raw.len()) as u64;
+        }
         if update && !self.fixed_norms {
             for (norm, r) in self.norms.iter_mut().zip(&raw) {
                 norm.update(r);
@@ -281,6 +303,34 @@ impl RewardEnsemble {
         Ok(())
     }
 
+    /// Caps each member's raw reward at quantile `q` (nearest rank, in (0, 1]) of its
+    /// per-step values over a ranked set ([`Composition::ceiling`]).
+    pub fn fix_ceilings_from(&mut self, set: &[crate::data::Trajectory], q: f64) -> Result<()> {
+        let mut values = vec![Vec::new(); self.nets.len()];
+        for t in set.iter().filter(|t| !t.is_empty()) {
+            for (m, r) in self.raw(t.next_obs(), &t.actions).into_iter().enumerate() {
+                values[m].extend(r);
+            }
+        }
+        if values[0].is_empty() || !(q > 0.0 && q <= 1.0) {
+            return Err(Error::Invalid(format!("reward.ceiling {q} needs a quantile in (0, 1] and a ranked set with steps")));
+        }
+        let ceilings = values
+            .into_iter()
+            .map(|mut v| {
+                v.sort_by(f32::total_cmp);
+                v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
+            })
+            .collect();
+        self.ceilings = Some(ceilings);
+        Ok(())
+    }
+
+    /// The fraction of members' per-step values RL trained on that the ceiling capped.
+    pub fn capped_fraction(&self) -> Option<f64> {
+        self.ceilings.as_ref().map(|_| self.capped.1 as f64 / self.capped.0.max(1) as f64)
+    }
+
     pub fn save(&self, dir: &Path, hyper: serde_json::Value) -> Result<()> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         save_weights(&self.stores.iter().collect::<Vec<_>>(), &dir.join(WEIGHTS))?;
@@ -313,6 +363,7 @@ mod tests {
         ctrl_action: CtrlAction::Raw,
         level: RewardLevel::Running,
         disagreement: 0.0,
+        ceiling: None,
     };
 
     #[test]
@@ -399,5 +450,47 @@ mod tests {
         model.fixed_norms = false;
         model.rl_reward(&[5.0, 6.0], &[0.0; 2], &[0.0; 2], 1, &comp, true);
         assert_ne!(model.norms, before);
+    }
+
+    /// The ceiling: each member's raw reward capped at a quantile of its values over the
+    /// ranked set, before the level; values below it pass unchanged.
+    #[test]
+    fn the_ceiling_caps_each_member_at_a_quantile_of_the_ranked_set() {
+        use crate::data::{TrajMeta, Trajectory};
+        let config = RewardConfig { obs_dim: 1, act_dim: None, hidden: vec![3], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let mut model = crate::nn::seeded(7, || RewardEnsemble::new(config));
+        let xs: Vec<f32> = (0..10).map(|i| i as f32 - 4.5).collect();
+        let set = vec![Trajectory {
+            obs_dim: 1,
+            act_dim: 1,
+            obs: std::iter::once(0.0).chain(xs.iter().copied()).collect(),
+            actions: vec![0.0; 10],
+            rewards: vec![0.0; 10],
+            terms: vec![Default::default(); 10],
+            meta: TrajMeta::default(),
+            ..Default::default()
+        }];
+        model.fix_ceilings_from(&set, 0.8).unwrap();
+        let seen = model.raw(&xs, &[0.0; 10]);
+        let ceilings = model.ceilings.clone().unwrap();
+        for m in 0..2 {
+            let mut v = seen[m].clone();
+            v.sort_by(f32::total_cmp);
+            assert_eq!(ceilings[m], v[7], "member {m}: the 8th of 10 values");
+        }
+        // Far outside the set a ReLU net extrapolates linearly; the cap holds it. (Levels
+        // fixed at mean 0, spread 1, so the reward is the members' mean raw value.)
+        model.fixed_norms = true;
+        let probe = [-50.0f32, 50.0, 0.0];
+        let capped = model.rl_reward(&probe, &[0.0; 3], &[0.0; 3], 1, &Composition { ceiling: Some(0.8), ..BASE }, true);
+        let raw = model.raw(&probe, &[0.0; 3]);
+        for i in 0..3 {
+            let want = (0..2).map(|m| raw[m][i].min(ceilings[m]) as f64).sum::<f64>() / 2.0;
+            assert!((capped[i] - want).abs() < 1e-6, "step {i}: {} vs {want}", capped[i]);
+        }
+        let over = (0..2).flat_map(|m| (0..3).map(move |i| (m, i))).filter(|&(m, i)| raw[m][i] > ceilings[m]).count();
+        assert!(over > 0, "the probe reaches past the cap");
+        assert_eq!(model.capped, (6, over as u64));
+        assert!(model.fix_ceilings_from(&set, 0.0).is_err() && model.fix_ceilings_from(&[], 0.5).is_err());
     }
 }

@@ -232,6 +232,9 @@ impl Pipeline {
         if !(spec.reward.disagreement.is_finite() && spec.reward.disagreement >= 0.0) {
             bad(&["reward", "disagreement"], format!("reward.disagreement is {}; give k >= 0 (0: no brake)", spec.reward.disagreement));
         }
+        if let Some(q) = spec.reward.ceiling.filter(|q| !(*q > 0.0 && *q <= 1.0)) {
+            bad(&["reward", "ceiling"], format!("reward.ceiling is {q}; give a quantile in (0, 1], e.g. 0.9"));
+        }
         if let Err(e) = spec.idrex.multi_bc.check() {
             bad(&["idrex", "multi_bc"], e);
         }
@@ -280,6 +283,7 @@ impl Pipeline {
             ctrl_action: spec.reward.ctrl_action,
             level: spec.reward.level,
             disagreement: spec.reward.disagreement,
+            ceiling: spec.reward.ceiling,
         };
         let device = spec.device.resolve();
         let replicates = first_replicate..first_replicate + replicates;

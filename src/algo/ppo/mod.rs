@@ -162,6 +162,8 @@ pub struct PpoResult {
     pub wall_s: f64,
     /// Where the wall time went (for `idrex bench ppo`; never stored).
     pub phases: Phases,
+    /// The learned reward's [`RewardEnsemble::capped_fraction`].
+    pub reward_capped: Option<f64>,
 }
 
 /// Seconds of a PPO run by phase.
@@ -342,7 +344,11 @@ pub fn train(
     // The rollout's time includes the environment's; each phase is counted once.
     phases.policy_s -= phases.env_s;
     phases.other_s = wall_s - phases.env_s - phases.policy_s - phases.reward_s - phases.update_s;
-    Ok(PpoResult { policy: agent, curve, wall_s, phases })
+    let reward_capped = match &reward {
+        RewardSource::Learned { model, .. } => model.capped_fraction(),
+        RewardSource::GroundTruth => None,
+    };
+    Ok(PpoResult { policy: agent, curve, wall_s, phases, reward_capped })
 }
 
 /// Steps every environment `num_steps` times with the current policy, filling `buf`;

@@ -179,6 +179,10 @@ pub struct RewardSettings {
     pub level: RewardLevel,
     /// k in mean - k x the members' spread, a brake on exploitation (0: none, the default).
     pub disagreement: f64,
+    /// A quantile q in (0, 1]: each member's raw reward per step is capped at the q-quantile
+    /// of its values over D-REX's ranked set, a brake on exploitation (absent: no cap, the
+    /// default and the original code).
+    pub ceiling: Option<f64>,
 }
 
 /// Per-method overrides of the shared stage parameters (any subset of their fields).

@@ -119,8 +119,9 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .enumerate()
         .map(|(r, &seed)| {
             let mut inputs = vec![io("reward", reward)];
-            if !p.composition.level.is_running() {
-                // D-REX's ranked set, the reward's first: where the ranked floor is measured.
+            if !p.composition.level.is_running() || p.composition.ceiling.is_some() {
+                // D-REX's ranked set, the reward's first: where the ranked floor and the
+                // ceiling are measured.
                 let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| role == "set0")).map(|(_, n)| n.clone());
                 inputs.push(io("floor", &set0.expect("a T-REX node trains on set0")));
             }
@@ -319,7 +320,7 @@ mod tests {
         a.keys().filter(|n| a[*n] != b[*n]).cloned().collect()
     }
 
-    /// The reward's level and the disagreement brake touch PPO only: exactly the PPO stages
+    /// The reward's level and the two brakes touch PPO only: exactly the PPO stages
     /// and what depends on them change (the stored rewards are reused); their defaults (the
     /// original's) change nothing.
     #[test]
@@ -330,7 +331,7 @@ mod tests {
         expected.sort();
         expected.dedup();
         assert!(!expected.is_empty());
-        for extra in ["reward:\n  level: ranked-floor\n", "reward:\n  disagreement: 0.5\n"] {
+        for extra in ["reward:\n  level: ranked-floor\n", "reward:\n  disagreement: 0.5\n", "reward:\n  ceiling: 0.99\n"] {
             let mut got = changed(extra);
             got.sort();
             assert_eq!(got, expected, "{extra}");
@@ -342,6 +343,9 @@ mod tests {
         let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}reward:\n  level: ranked-floor\n")).unwrap();
         let g = expand(&p).unwrap();
         let ppo = g.get("drex/ppo/0").unwrap();
+        assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
+        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}reward:\n  ceiling: 0.99\n")).unwrap();
+        let ppo = expand(&p).unwrap().get("drex/ppo/0").unwrap().clone();
         assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
     }
 

@@ -2,7 +2,8 @@
 //! learning curve and a checkpoint every `ppo.checkpoint_every` updates
 //! (`checkpoints/step-<global step>/`, the final policy always among them), which the
 //! evaluation stage evaluates one by one. With `reward.level: ranked-floor`, the reward's
-//! levels are fixed from the `floor` input (D-REX's ranked set) before training.
+//! levels are fixed from the `floor` input (D-REX's ranked set) before training; with
+//! `reward.ceiling`, each member's cap is measured there too.
 use super::{POLICY, REWARD, StageCtx, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
 use crate::env::EnvId;
@@ -37,6 +38,10 @@ pub struct PpoMetrics {
     pub wall_s: f64,
     pub steps_per_s: f64,
     pub curve: Vec<CurvePoint>,
+    /// With `reward.ceiling`: the fraction of the members' per-step values RL trained on
+    /// that the ceiling capped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reward_capped: Option<f64>,
 }
 
 pub const CURVE: &str = "curve.csv";
@@ -44,8 +49,14 @@ pub const CURVE: &str = "curve.csv";
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
     let mut reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
-    if p.reward.level == RewardLevel::RankedFloor {
-        reward.fix_levels_from(&super::read_rollouts(ctx.input("floor")?)?)?;
+    if p.reward.level == RewardLevel::RankedFloor || p.reward.ceiling.is_some() {
+        let set = super::read_rollouts(ctx.input("floor")?)?;
+        if p.reward.level == RewardLevel::RankedFloor {
+            reward.fix_levels_from(&set)?;
+        }
+        if let Some(q) = p.reward.ceiling {
+            reward.fix_ceilings_from(&set, q)?;
+        }
     }
     reward.to_device(p.device)?;
     let mut show = ppo_progress(ctx, cfg.total_steps);
@@ -72,5 +83,6 @@ pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
             .iter()
             .map(|u| CurvePoint { step: u.global_step, true_return: u.episodic_return, learned_return: u.learned_return })
             .collect(),
+        reward_capped: res.reward_capped,
     })
 }
