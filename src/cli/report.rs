@@ -20,6 +20,10 @@ pub struct ReportArgs {
     pub format: ReportFormat,
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
+    /// Compare two replicated studies method by method, paired by replicate
+    /// (`comparisons.csv`); repeatable.
+    #[arg(long, value_name = "STUDY:BASELINE")]
+    pub compare: Vec<String>,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -29,6 +33,21 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
+    }
+    let mut comparisons = Vec::new();
+    for pair in &args.compare {
+        use crate::report::studies;
+        let Some((study, baseline)) = pair.split_once(':') else {
+            bail!("--compare {pair}: give STUDY:BASELINE, two study names of the report joined by a colon");
+        };
+        let rows = studies::compare(&t.aggregate, study, baseline);
+        if rows.is_empty() {
+            let mut names: Vec<&str> = t.aggregate.iter().map(|a| a.study.as_str()).collect();
+            names.sort_unstable();
+            names.dedup();
+            bail!("--compare {pair}: no method of both studies on a shared replicate; replicated studies here: {}", names.join(", "));
+        }
+        comparisons.extend(rows);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
     if args.format != ReportFormat::Md {
@@ -40,13 +59,22 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             crate::report::write_csv(&mut crate::report::studies::aggregate_frame(&t.aggregate)?, &args.out.join("aggregate.csv"))?;
             crate::report::write_csv(&mut crate::report::studies::improvement_frame(&t.improvement)?, &args.out.join("improvement.csv"))?;
         }
+        if !comparisons.is_empty() {
+            let mut frame = crate::report::studies::comparison_frame(&comparisons)?;
+            crate::report::write_csv(&mut frame, &args.out.join("comparisons.csv"))?;
+        }
         if !t.clones.is_empty() {
             crate::report::write_csv(&mut crate::report::clones::frame(&t.clones)?, &args.out.join("clones.csv"))?;
         }
     }
     let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"))?;
     let notes = crate::report::notes(&store)?;
-    let md = format!("{}{notes}{}", crate::report::markdown(&t), crate::report::figures::markdown(&figures, "figures"));
+    let md = format!(
+        "{}{}{notes}{}",
+        crate::report::markdown(&t),
+        crate::report::studies::comparison_markdown(&comparisons),
+        crate::report::figures::markdown(&figures, "figures")
+    );
     if args.format != ReportFormat::Csv {
         std::fs::write(args.out.join("report.md"), &md)?;
     }

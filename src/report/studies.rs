@@ -111,8 +111,7 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
             else {
                 continue;
             };
-            let pairs: Vec<(f64, f64)> =
-                a.scores.iter().filter_map(|(r, x)| b.scores.iter().find(|(rb, _)| rb == r).map(|(_, y)| (*x, *y))).collect();
+            let pairs = paired(a, b);
             let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
             improvement.push(ImprovementRow {
                 env: a.env.clone(),
@@ -127,6 +126,113 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
         }
     }
     (out, improvement)
+}
+
+/// The two rows' scores on the replicates both have, replicate by replicate.
+fn paired(a: &AggregateRow, b: &AggregateRow) -> Vec<(f64, f64)> {
+    a.scores.iter().filter_map(|(r, x)| b.scores.iter().find(|(rb, _)| rb == r).map(|(_, y)| (*x, *y))).collect()
+}
+
+/// One method in two studies over the replicates both ran (`idrex report --compare
+/// STUDY:BASELINE`): paired by replicate, since replicate r of two studies on the same seeds
+/// shares its seeds and every stage the two files do not change (its rewards, where only
+/// PPO's settings differ).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ComparisonRow {
+    pub env: String,
+    pub protocol: Protocol,
+    pub method: String,
+    pub study: String,
+    pub baseline: String,
+    /// Replicates both studies evaluated.
+    pub replicates: usize,
+    /// Their mean scores over those replicates.
+    pub study_mean: f64,
+    pub baseline_mean: f64,
+    /// Replicates where the study scored above the baseline.
+    pub above: usize,
+    /// P(study > baseline) over those replicates, with its 95 % interval resampling them.
+    pub probability: f64,
+    pub ci: (f64, f64),
+}
+
+/// Every (env, protocol, method) that both studies aggregate, compared on their shared
+/// replicates.
+pub fn compare(rows: &[AggregateRow], study: &str, baseline: &str) -> Vec<ComparisonRow> {
+    rows.iter()
+        .filter(|a| a.study == study)
+        .filter_map(|a| {
+            let b = rows.iter().find(|b| b.study == baseline && b.env == a.env && b.protocol == a.protocol && b.method == a.method)?;
+            let pairs = paired(a, b);
+            if pairs.is_empty() {
+                return None;
+            }
+            let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
+            Some(ComparisonRow {
+                env: a.env.clone(),
+                protocol: a.protocol,
+                method: a.method.clone(),
+                study: study.into(),
+                baseline: baseline.into(),
+                replicates: pairs.len(),
+                study_mean: mean_of(&x),
+                baseline_mean: mean_of(&y),
+                above: pairs.iter().filter(|(a, b)| a > b).count(),
+                probability: probability_of_improvement(&x, &y),
+                ci: probability_of_improvement_ci(&pairs, RESAMPLES, 3),
+            })
+        })
+        .collect()
+}
+
+/// `comparisons.csv`: one row per (env, protocol, method, study, baseline).
+pub fn comparison_frame(rows: &[ComparisonRow]) -> Result<DataFrame> {
+    let s = |f: &dyn Fn(&ComparisonRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
+    let x = |f: &dyn Fn(&ComparisonRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    DataFrame::new_infer_height(vec![
+        Column::new("env".into(), s(&|r| r.env.clone())),
+        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
+        Column::new("method".into(), s(&|r| r.method.clone())),
+        Column::new("study".into(), s(&|r| r.study.clone())),
+        Column::new("baseline".into(), s(&|r| r.baseline.clone())),
+        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
+        Column::new("study_mean".into(), x(&|r| r.study_mean)),
+        Column::new("baseline_mean".into(), x(&|r| r.baseline_mean)),
+        Column::new("above".into(), rows.iter().map(|r| r.above as u64).collect::<Vec<_>>()),
+        Column::new("probability".into(), x(&|r| r.probability)),
+        Column::new("ci_low".into(), x(&|r| r.ci.0)),
+        Column::new("ci_high".into(), x(&|r| r.ci.1)),
+    ])
+    .map_err(pe)
+}
+
+/// The comparisons' section of `report.md`.
+pub fn comparison_markdown(rows: &[ComparisonRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from(
+        "\n## Studies against each other (paired by replicate)\n\n| env | protocol | method | study | baseline | replicates | study mean | baseline mean | above on | P(study > baseline) [95 % CI] |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} of {} | {:.2} [{:.2}, {:.2}] |\n",
+            r.env,
+            r.protocol.name(),
+            r.method,
+            r.study,
+            r.baseline,
+            r.replicates,
+            num(Some(r.study_mean)),
+            num(Some(r.baseline_mean)),
+            r.above,
+            r.replicates,
+            r.probability,
+            r.ci.0,
+            r.ci.1
+        ));
+    }
+    out
 }
 
 /// `aggregate.csv`: one row per (env, study, method, protocol).
@@ -271,5 +377,29 @@ mod tests {
         assert!(md.contains("| drex | 4 (8) | 5.5 [") && md.contains("study `s`"), "{md}");
         let csv = aggregate_frame(&agg).unwrap();
         assert_eq!(csv.height(), 2);
+    }
+
+    /// Two studies compared replicate by replicate, on the replicates both ran.
+    #[test]
+    fn compares_two_studies_on_their_shared_replicates() {
+        let mut rows = Vec::new();
+        for (r, new, old) in [(1, 5.0, 1.0), (2, 6.0, 7.0), (3, 8.0, 2.0)] {
+            rows.push(row("new", r, "drex", &[new]));
+            rows.push(row("old", r, "drex", &[old]));
+        }
+        rows.push(row("old", 4, "drex", &[100.0]));
+        let (agg, _) = aggregate(&rows, &BTreeMap::new());
+        let c = compare(&agg, "new", "old");
+        assert_eq!(c.len(), 1);
+        let c = &c[0];
+        assert_eq!((c.replicates, c.above), (3, 2), "replicate 4 is the old study's alone");
+        assert_eq!((c.study_mean, c.baseline_mean), (19.0 / 3.0, 10.0 / 3.0));
+        // 5 beats 1 and 2; 6 beats 1 and 2; 8 beats all three.
+        assert_eq!(c.probability, 7.0 / 9.0);
+        assert!(c.ci.0 <= c.probability && c.probability <= c.ci.1);
+        assert!(compare(&agg, "new", "missing").is_empty());
+        let md = comparison_markdown(&[c.clone()]);
+        assert!(md.contains("| Hopper-v5 | final | drex | new | old | 3 | 6.3 | 3.3 | 2 of 3 | 0.78 ["), "{md}");
+        assert_eq!(comparison_frame(&[c.clone()]).unwrap().height(), 1);
     }
 }
