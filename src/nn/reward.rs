@@ -134,7 +134,7 @@ pub struct RewardEnsemble {
     pub fixed_norms: bool,
     /// Each member's cap on its raw reward ([`Composition::ceiling`]), where set.
     pub ceilings: Option<Vec<f32>>,
-    /// Steps RL trained on and, of those, members' values the ceiling capped.
+    /// Members' per-step values RL trained on, and of those the ones the ceiling capped.
     pub capped: (u64, u64),
 }
 
