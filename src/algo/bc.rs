@@ -239,7 +239,7 @@ pub fn train_validated(
 fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
     let (od, ad) = (data.od, data.ad);
     let policy = data.policy(cfg, seed);
-    let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers);
+    let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers, crate::nn::bf16::Precision::F32);
     let mut lanes: Vec<Lane> = (0..LANES)
         .map(|_| Lane {
             scratch: Scratch::default(),

@@ -5,6 +5,7 @@ use std::time::Instant;
 use anyhow::Context;
 
 use super::env::default_python;
+use crate::nn::bf16::Precision;
 use crate::nn::{Device, DeviceChoice};
 
 #[derive(Debug, clap::Args)]
@@ -82,9 +83,10 @@ fn gemm_gflops(threads: usize, device: Device) -> f64 {
 }
 
 /// One thread's matrix-product rate at T-REX's hidden layer (a chunk of 200 rows through
-/// 256 x 256), in GFLOP/s, best of 5: idrex's kernel (`nn::gemm`, the active variant) and
-/// libtorch's (MKL's) on the same operands.
-fn hidden_layer_gflops() -> (f64, f64) {
+/// 256 x 256), in GFLOP/s, best of 5: idrex's kernel (`nn::gemm`, the active variant),
+/// libtorch's (MKL's) on the same operands, and idrex's bf16 product (`nn::bf16`, its active
+/// path).
+fn hidden_layer_gflops() -> (f64, f64, f64) {
     let (m, n, k) = (200usize, 256usize, 256usize);
     let a: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
     let b: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.91).cos()).collect();
@@ -102,10 +104,11 @@ fn hidden_layer_gflops() -> (f64, f64) {
             .fold(f64::INFINITY, f64::min)
     };
     let ours = best(&mut || (0..reps).for_each(|_| crate::nn::gemm::gemm(false, false, m, n, k, &a, k, &b, n, 0.0, &mut c, n)));
+    let bf16 = best(&mut || (0..reps).for_each(|_| crate::nn::bf16::gemm_bf16(false, false, m, n, k, &a, k, &b, n, 0.0, &mut c, n)));
     crate::nn::single_threaded();
     let (ta, tb) = (tch::Tensor::from_slice(&a).view([m as i64, k as i64]), tch::Tensor::from_slice(&b).view([k as i64, n as i64]));
     let torch = best(&mut || (0..reps).for_each(|_| _ = ta.matmul(&tb)));
-    (flop / ours / 1e9, flop / torch / 1e9)
+    (flop / ours / 1e9, flop / torch / 1e9, flop / bf16 / 1e9)
 }
 
 /// The learned reward's inference, as PPO calls it once per rollout (2,048 rows of
@@ -152,15 +155,16 @@ fn marginal(n: usize, mut f: impl FnMut(usize) -> anyhow::Result<()>) -> anyhow:
     Ok((t.elapsed().as_secs_f64() - once).max(1e-9))
 }
 
-/// idrex's T-REX (model-iterations/s) and BC (iterations/s) rates on `device`.
-fn learner_rates(args: &LearnersBenchArgs, threads: usize, device: Device) -> anyhow::Result<(f64, f64)> {
+/// idrex's T-REX (model-iterations/s, its products at `precision`) and BC (iterations/s)
+/// rates on `device`.
+fn learner_rates(args: &LearnersBenchArgs, threads: usize, device: Device, precision: Precision) -> anyhow::Result<(f64, f64)> {
     use crate::algo::{bc, trex};
     // T-REX: 100 episodes of 1000 steps, 3 members on `threads` workers.
     let trajs = synthetic(100, 1000, 0);
     let ranking = trex::Ranking::by_score(trajs.iter().map(|t| -t.meta.noise).collect());
     crate::nn::single_threaded();
     let trex_s = marginal(args.trex_iterations, |n| {
-        let cfg = trex::TrexConfig { iterations: n, ..Default::default() };
+        let cfg = trex::TrexConfig { iterations: n, precision, ..Default::default() };
         trex::train(&trajs, &ranking, &cfg, 0, threads, device).map(|_| ()).map_err(Into::into)
     })?;
     // BC: one 1000-step demonstration, on `threads` threads as the PyTorch side gets (the
@@ -178,11 +182,12 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     let device = args.device.resolve();
     device.ensure_available()?;
     let peak = gemm_gflops(threads, device);
-    let (kernel_gflops, libtorch_gflops) = hidden_layer_gflops();
+    let (kernel_gflops, libtorch_gflops, bf16_gflops) = hidden_layer_gflops();
     let (reward_rows, torch_reward_rows) = reward_inference_rates();
-    let (trex_rate, bc_rate) = learner_rates(args, threads, device)?;
-    // On the GPU, the CPU learners are the figure to beat.
-    let cpu = if device.is_cpu() { None } else { Some(learner_rates(args, threads, Device::Cpu)?) };
+    let (trex_rate, bc_rate) = learner_rates(args, threads, device, Precision::F32)?;
+    // On the GPU, the CPU learners are the figure to beat; on the CPU, T-REX in bf16.
+    let cpu = if device.is_cpu() { None } else { Some(learner_rates(args, threads, Device::Cpu, Precision::F32)?) };
+    let trex_bf16 = if device.is_cpu() { Some(learner_rates(args, threads, device, Precision::Bf16)?.0) } else { None };
     let python = args.python.clone().or_else(default_python).filter(|p| p != "none");
     let torch: Option<serde_json::Value> = match &python {
         None => None,
@@ -210,6 +215,8 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         "hidden_layer_one_thread": {
             "idrex_gflops": kernel_gflops, "libtorch_gflops": libtorch_gflops, "ratio": kernel_gflops / libtorch_gflops,
             "fraction_of_gemm_peak_per_thread": kernel_gflops / (peak / threads as f64),
+            "idrex_bf16_gflops": bf16_gflops, "bf16_over_f32": bf16_gflops / kernel_gflops,
+            "bf16_path": crate::nn::bf16::Bf16Path::active().name(),
         },
         "reward_inference_one_thread": {
             "idrex_rows_per_s": reward_rows, "libtorch_rows_per_s": torch_reward_rows, "ratio": reward_rows / torch_reward_rows,
@@ -220,6 +227,8 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
             "fraction_of_gemm_peak": trex_rate * TREX_FLOP / 1e9 / peak,
             "pytorch_fraction_of_gemm_peak": pt_trex.map(|p| p * TREX_FLOP / 1e9 / peak),
             "idrex_cpu_model_iterations_per_s": cpu.map(|c| c.0), "speedup_over_idrex_cpu": cpu.map(|c| trex_rate / c.0),
+            "idrex_bf16_model_iterations_per_s": trex_bf16, "bf16_over_f32": trex_bf16.map(|b| b / trex_rate),
+            "bf16_ratio_over_pytorch": trex_bf16.zip(pt_trex).map(|(b, p)| b / p),
         },
         "bc": {
             "idrex_iterations_per_s": bc_rate, "pytorch_iterations_per_s": pt_bc,

@@ -15,6 +15,7 @@
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
 use tch::Tensor;
 
+use super::bf16::{Precision, gemm_bf16};
 use super::gemm::Kernel;
 use super::gemm::gemm;
 use super::{Activation, FlushDenormals, Mlp};
@@ -86,6 +87,9 @@ pub struct Dense {
     /// Each layer's weight transposed (`in x out`, at the weight's offset), which the forward
     /// pass reads in place; [`Dense::refresh`] rewrites it after the parameters change.
     wt: Buf,
+    /// The factors of the training products (inference, [`Dense::predict`] included, takes
+    /// whatever this says; networks are made in f32).
+    precision: Precision,
 }
 
 /// One thread's activations and gradient buffers, grown to the largest chunk it has seen.
@@ -110,9 +114,27 @@ impl Dense {
         }
         let mut buf = Buf::zeros(params.len());
         buf.copy_from_slice(&params);
-        let mut dense = Dense { layers, params: buf, wt: Buf::zeros(params.len()) };
+        let mut dense = Dense { layers, params: buf, wt: Buf::zeros(params.len()), precision: Precision::F32 };
         dense.refresh();
         dense
+    }
+
+    /// The same network computing its products at `precision`.
+    pub fn with_precision(self, precision: Precision) -> Self {
+        Dense { precision, ..self }
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.precision
+    }
+
+    /// One product of the passes, at the network's precision.
+    #[allow(clippy::too_many_arguments)]
+    fn gemm(&self, ta: bool, tb: bool, m: usize, n: usize, k: usize, a: &[f32], lda: usize, b: &[f32], ldb: usize, beta: f32, c: &mut [f32], ldc: usize) {
+        match self.precision {
+            Precision::F32 => gemm(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),
+            Precision::Bf16 => gemm_bf16(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),
+        }
     }
 
     /// Rewrites the transposed weights from the parameters: call after changing them.
@@ -166,7 +188,7 @@ impl Dense {
             let input: &[f32] = if i == 0 { x } else { &done[i - 1] };
             let y = &mut rest[0];
             y.resize(rows * l.out);
-            gemm(false, false, rows, l.out, l.inp, input, l.inp, &self.wt[l.w..l.b()], l.out, 0.0, y, l.out);
+            self.gemm(false, false, rows, l.out, l.inp, input, l.inp, &self.wt[l.w..l.b()], l.out, 0.0, y, l.out);
             add_bias(y, &self.params[l.b()..l.b() + l.out], i < last);
         }
         &s.acts[last][..rows * self.output_dim()]
@@ -197,10 +219,10 @@ impl Dense {
             // The gradient with respect to this layer's outputs (its bias's is already added).
             let cur: &[f32] = if i == last { &dout[..rows * l.out] } else { d };
             let input: &[f32] = if i == 0 { x } else { &acts[i - 1] };
-            gemm(true, false, l.out, l.inp, rows, cur, l.out, input, l.inp, 1.0, &mut grads[l.w..l.b()], l.inp);
+            self.gemm(true, false, l.out, l.inp, rows, cur, l.out, input, l.inp, 1.0, &mut grads[l.w..l.b()], l.inp);
             if i > 0 {
                 dprev.resize(rows * l.inp);
-                gemm(false, false, rows, l.inp, l.out, cur, l.out, &self.params[l.w..l.b()], l.inp, 0.0, dprev, l.inp);
+                self.gemm(false, false, rows, l.inp, l.out, cur, l.out, &self.params[l.w..l.b()], l.inp, 0.0, dprev, l.inp);
                 let below = self.layers[i - 1];
                 relu_backward(dprev, input, &mut grads[below.b()..below.b() + below.out]);
                 std::mem::swap(d, dprev);
@@ -346,10 +368,10 @@ pub struct Trainer {
 
 impl Trainer {
     /// Trains `mlp`'s parameters with Adam at `lr` and `l2` x the sum of squared weights
-    /// added to the loss, on up to `threads` threads.
-    pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize) -> Self {
+    /// added to the loss, on up to `threads` threads, its products at `precision`.
+    pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize, precision: Precision) -> Self {
         let _ftz = FlushDenormals::new();
-        let net = Dense::from_mlp(mlp);
+        let net = Dense::from_mlp(mlp).with_precision(precision);
         let (adam, grads) = (Adam::new(net.len(), lr), Buf::zeros(net.len()));
         Trainer { net, adam, grads, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
     }

@@ -1,6 +1,7 @@
 //! Neural networks on tch: MLP blocks, the Gaussian actor-critic, the T-REX reward net and
 //! ensembles, and a pure-Rust copy of an MLP for per-step inference in rollouts (one
 //! observation at a time, where libtorch's per-call overhead would dominate).
+pub mod bf16;
 pub mod cpu;
 pub mod dense;
 pub mod device;

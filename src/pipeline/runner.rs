@@ -129,7 +129,7 @@ fn run_node(
             ended_unix: now_unix(),
             wall_s,
             idrex_version: env!("CARGO_PKG_VERSION").to_string(),
-            kernel: Some(crate::nn::gemm::Kernel::active().name().to_string()),
+            kernel: Some(node.params.cpu_path()),
         };
         store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })

@@ -13,6 +13,7 @@ use tch::nn;
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
+use crate::nn::bf16::Precision;
 use crate::nn::dense::{Buf, Dense, LANES, Scratch, Trainer};
 use crate::nn::{Device, RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};
@@ -49,6 +50,11 @@ pub struct TrexConfig {
     pub action_input: bool,
     /// Initialisation of the reward networks.
     pub init: WeightInit,
+    /// The factors of the training products: f32 (the default) or bf16 with f32
+    /// accumulation (`nn::bf16`; native where the processor has AVX512-BF16, the same bits
+    /// emulated elsewhere). Inference is f32 either way.
+    #[serde(skip_serializing_if = "Precision::is_f32")]
+    pub precision: Precision,
 }
 
 impl Default for TrexConfig {
@@ -70,6 +76,7 @@ impl Default for TrexConfig {
             // PPO's reward composition kept the learned reward's gains on HalfCheetah
             // (analysis/results/ablation.md).
             init: WeightInit::Normal002,
+            precision: Precision::F32,
         }
     }
 }
@@ -280,6 +287,9 @@ pub fn train(
     let mut model = crate::nn::seeded(seed, || RewardEnsemble::new(config));
     if device == Device::Cuda {
         device.ensure_available()?;
+        if cfg.precision != Precision::F32 {
+            return Err(Error::Invalid("trex.precision: bf16 is a CPU path; on a GPU set precision: f32 (or device: cpu)".into()));
+        }
         let reports = train_torch(&mut model, trajs, ranking, cfg, seed, device.tch())?;
         return Ok((model, reports));
     }
@@ -349,7 +359,7 @@ fn train_model(
 ) -> Result<ModelReport> {
     let (pairs, n_val, mut rng) = model_pairs(m, trajs, ranking, cfg, seed)?;
     let (val, train) = pairs.split_at(n_val);
-    let mut trainer = Trainer::new(net, cfg.lr, cfg.l2, threads);
+    let mut trainer = Trainer::new(net, cfg.lr, cfg.l2, threads, cfg.precision);
     let mut lanes: Vec<Lane> = (0..LANES).map(|_| Lane::new(trainer.net.len())).collect();
     let mut final_loss = f64::NAN;
     let mut curve = Vec::new();
@@ -444,6 +454,41 @@ mod tests {
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
         assert!(spearman(&pred, &truth) > 0.9, "spearman {}", spearman(&pred, &truth));
         assert!(pairwise_accuracy(&pred, &truth) > 0.85);
+    }
+
+    /// In bf16 the reward learns the same ranking as in f32, its weights are close to the
+    /// f32 run's but not equal (the products round differently), and they do not depend on
+    /// the number of workers.
+    #[test]
+    fn learns_in_bf16_and_does_not_depend_on_the_workers() {
+        let mut rng = ChaCha8Rng::seed_from_u64(0);
+        let train_set = toy(30, &mut rng);
+        let test_set = toy(30, &mut rng);
+        let ranking = Ranking::by_score(train_set.iter().map(|t| t.ret()).collect());
+        let cfg = TrexConfig {
+            hidden: vec![32, 32],
+            models: 2,
+            pairs_per_model: 1000,
+            window: 20,
+            min_margin: 1.0,
+            lr: 1e-3,
+            iterations: 300,
+            l2: 0.0,
+            precision: Precision::Bf16,
+            ..Default::default()
+        };
+        let (model, reports) = train(&train_set, &ranking, &cfg, 1, 2, Device::Cpu).unwrap();
+        assert!(reports.iter().all(|r| r.val_accuracy > 0.85), "{reports:?}");
+        let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
+        let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
+        assert!(spearman(&pred, &truth) > 0.9, "spearman {}", spearman(&pred, &truth));
+        let (f32_model, _) = train(&train_set, &ranking, &TrexConfig { precision: Precision::F32, ..cfg.clone() }, 1, 2, Device::Cpu).unwrap();
+        assert_ne!(weights(&model), weights(&f32_model));
+        for workers in [1, 3] {
+            let (again, again_reports) = train(&train_set, &ranking, &cfg, 1, workers, Device::Cpu).unwrap();
+            assert_eq!(weights(&again), weights(&model), "{workers} workers");
+            assert_eq!(again_reports, reports);
+        }
     }
 
     /// Every parameter of every model, flat.

@@ -349,6 +349,23 @@ mod tests {
         assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
     }
 
+    /// Training the rewards in bf16 changes every T-REX stage and what follows it (BC and the
+    /// rollouts it feeds are reused); `precision: f32` is the default and changes nothing.
+    #[test]
+    fn reward_precision_changes_exactly_the_trex_stages_and_what_follows() {
+        let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
+        let mut expected: Vec<String> =
+            g.nodes.iter().filter(|n| n.kind() == StageKind::Trex).flat_map(|n| g.descendants(&n.name)).collect();
+        expected.sort();
+        expected.dedup();
+        assert!(expected.iter().any(|n| n == "drex/trex") && expected.iter().any(|n| n.starts_with("drex/ppo/")));
+        let mut got = changed("trex:\n  precision: bf16\n");
+        got.sort();
+        assert_eq!(got, expected);
+        assert!(!got.iter().any(|n| n == "bc" || n == "drex/noise"), "{got:?}");
+        assert!(changed("trex:\n  precision: f32\n").is_empty());
+    }
+
     /// Replicate r has the same keys whatever the count, replicate 0 those of the file
     /// without replicates; every replicate has its own seeds for every stage; a study takes
     /// replicates per environment; two files of one study split its replicates.

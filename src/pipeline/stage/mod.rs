@@ -139,6 +139,19 @@ impl Params {
             _ => Device::Cpu,
         }
     }
+
+    /// The CPU code path the stage's products take, for the manifest (information only:
+    /// every path gives the same bytes): the f32 kernel variant, and where the stage trains
+    /// in bf16, the bf16 path.
+    pub fn cpu_path(&self) -> String {
+        let kernel = crate::nn::gemm::Kernel::active().name();
+        match self {
+            Params::Trex(p) if p.trex.precision == crate::nn::bf16::Precision::Bf16 => {
+                format!("{kernel}; bf16 {}", crate::nn::bf16::Bf16Path::active().name())
+            }
+            _ => kernel.to_string(),
+        }
+    }
 }
 
 fn parse<T: serde::de::DeserializeOwned>(kind: StageKind, what: &str, v: &Value) -> Result<T> {
