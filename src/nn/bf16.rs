@@ -138,7 +138,8 @@ pub fn gemm_bf16_with(
     // op(A)(i, p) is a[i * ars + p * acs]; op(B)(p, j) is b[p * brs + j * bcs].
     let (ars, acs) = if ta { (1, lda) } else { (lda, 1) };
     let (brs, bcs) = if tb { (1, ldb) } else { (ldb, 1) };
-    let need = |rows: usize, cols: usize, rs: usize, cs: usize| if rows == 0 || cols == 0 { 0 } else { (rows - 1) * rs + (cols - 1) * cs + 1 };
+    let need =
+        |rows: usize, cols: usize, rs: usize, cs: usize| if rows == 0 || cols == 0 { 0 } else { (rows - 1) * rs + (cols - 1) * cs + 1 };
     assert!(a.len() >= need(m, k, ars, acs) && b.len() >= need(k, n, brs, bcs), "gemm: a buffer is too short");
     let at = |i: usize, p: usize| a[i * ars + p * acs];
     let bt = |p: usize, j: usize| b[p * brs + j * bcs];
@@ -225,14 +226,20 @@ mod native {
             }
         } else if along == 1 {
             // Each line is contiguous along the summed dimension: adjacent terms make a pair.
+            // Converted into a contiguous run first (which vectorises), then spread into the
+            // panel's column.
             let full = kc.min((k / 2).saturating_sub(q0));
+            let mut run = [0u32; KCP];
             for l in 0..width {
                 let line = &x[(first + l) * across + 2 * q0..];
-                for (q, t) in line[..2 * full].chunks_exact(2).enumerate() {
-                    dst[q * w + l] = pair(t[0], t[1]);
+                for (r, t) in run[..full].iter_mut().zip(line[..2 * full].chunks_exact(2)) {
+                    *r = pair(t[0], t[1]);
                 }
                 if full < kc {
-                    dst[full * w + l] = pair(line[0..][2 * full], 0.0);
+                    run[full] = pair(line[2 * full], 0.0);
+                }
+                for (q, &r) in run[..kc].iter().enumerate() {
+                    dst[q * w + l] = r;
                 }
             }
         } else {
@@ -249,7 +256,16 @@ mod native {
 
     /// `C (+)= op(A) op(B)`, `a` and `b` as (buffer, row stride, column stride).
     #[allow(clippy::too_many_arguments)]
-    pub unsafe fn product(m: usize, n: usize, k: usize, a: (&[f32], usize, usize), b: (&[f32], usize, usize), accumulate: bool, c: &mut [f32], ldc: usize) {
+    pub unsafe fn product(
+        m: usize,
+        n: usize,
+        k: usize,
+        a: (&[f32], usize, usize),
+        b: (&[f32], usize, usize),
+        accumulate: bool,
+        c: &mut [f32],
+        ldc: usize,
+    ) {
         let pairs = k.div_ceil(2);
         let (mp, np) = (m.div_ceil(MR), n.div_ceil(NR));
         PACKS.with(|packs| {
@@ -336,7 +352,20 @@ mod tests {
 
     /// The definition, element by element.
     #[allow(clippy::too_many_arguments)]
-    fn reference(ta: bool, tb: bool, m: usize, n: usize, k: usize, a: &[f32], lda: usize, b: &[f32], ldb: usize, beta: f32, c: &mut [f32], ldc: usize) {
+    fn reference(
+        ta: bool,
+        tb: bool,
+        m: usize,
+        n: usize,
+        k: usize,
+        a: &[f32],
+        lda: usize,
+        b: &[f32],
+        ldb: usize,
+        beta: f32,
+        c: &mut [f32],
+        ldc: usize,
+    ) {
         let r = |x: f32| from_bf16(to_bf16(x));
         for i in 0..m {
             for j in 0..n {

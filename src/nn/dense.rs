@@ -130,7 +130,21 @@ impl Dense {
 
     /// One product of the passes, at the network's precision.
     #[allow(clippy::too_many_arguments)]
-    fn gemm(&self, ta: bool, tb: bool, m: usize, n: usize, k: usize, a: &[f32], lda: usize, b: &[f32], ldb: usize, beta: f32, c: &mut [f32], ldc: usize) {
+    fn gemm(
+        &self,
+        ta: bool,
+        tb: bool,
+        m: usize,
+        n: usize,
+        k: usize,
+        a: &[f32],
+        lda: usize,
+        b: &[f32],
+        ldb: usize,
+        beta: f32,
+        c: &mut [f32],
+        ldc: usize,
+    ) {
         match self.precision {
             Precision::F32 => gemm(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),
             Precision::Bf16 => gemm_bf16(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),

@@ -482,7 +482,8 @@ mod tests {
         let pred: Vec<f64> = test_set.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect();
         let truth: Vec<f64> = test_set.iter().map(|t| t.ret()).collect();
         assert!(spearman(&pred, &truth) > 0.9, "spearman {}", spearman(&pred, &truth));
-        let (f32_model, _) = train(&train_set, &ranking, &TrexConfig { precision: Precision::F32, ..cfg.clone() }, 1, 2, Device::Cpu).unwrap();
+        let (f32_model, _) =
+            train(&train_set, &ranking, &TrexConfig { precision: Precision::F32, ..cfg.clone() }, 1, 2, Device::Cpu).unwrap();
         assert_ne!(weights(&model), weights(&f32_model));
         for workers in [1, 3] {
             let (again, again_reports) = train(&train_set, &ranking, &cfg, 1, workers, Device::Cpu).unwrap();
