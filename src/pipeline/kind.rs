@@ -47,8 +47,11 @@ impl StageKind {
             // stopping, fidelity measured, and a per-step filter.
             StageKind::MultiBcRollouts => 4,
             // 2: the networks' initial weights (PPO) and the learned reward's inference
-            // (PPO, evaluation) from idrex's own code instead of libtorch's.
-            StageKind::Demonstrator | StageKind::Ppo | StageKind::Eval => 2,
+            // (PPO, evaluation) from idrex's own code instead of libtorch's. 3 (PPO and the
+            // demonstrator, which PPO trains): the minibatch update's products through
+            // nn::gemm (fused multiply-adds) instead of plain loops.
+            StageKind::Demonstrator | StageKind::Ppo => 3,
+            StageKind::Eval => 2,
             _ => 1,
         }
     }

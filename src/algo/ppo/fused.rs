@@ -9,6 +9,7 @@
 //! loss and every gradient against libtorch's autograd of the same loss.
 use std::collections::HashMap;
 
+use crate::nn::gemm::gemm;
 use crate::nn::{Activation, ActorCritic};
 
 #[derive(Debug, Clone, Copy)]
@@ -54,7 +55,6 @@ pub struct Fused {
     steps: i32,
     acts_a: Vec<Vec<f32>>,
     acts_c: Vec<Vec<f32>>,
-    wt: Vec<f32>,
 }
 
 fn tensor_vec(t: &tch::Tensor) -> Vec<f32> {
@@ -102,7 +102,6 @@ impl Fused {
             steps: 0,
             acts_a: Vec::new(),
             acts_c: Vec::new(),
-            wt: Vec::new(),
         }
     }
 
@@ -118,42 +117,33 @@ impl Fused {
         });
     }
 
-    /// `acts[0] = x`, `acts[l + 1]` = output of layer l. Rows are accumulated as
-    /// `y += x_i * W^T[i]` (contiguous, vectorisable) from a transposed copy of each weight.
-    fn forward(params: &[f32], layers: &[Layer], act: Activation, x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>, wt: &mut Vec<f32>) {
+    /// `acts[0] = x`, `acts[l + 1]` = output of layer l: each row starts from the bias and
+    /// adds `x W^T` through idrex's matrix product ([`crate::nn::gemm`]: the same bits on
+    /// every processor).
+    fn forward(params: &[f32], layers: &[Layer], act: Activation, x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>) {
         acts.resize(layers.len() + 1, Vec::new());
         acts[0].clear();
         acts[0].extend_from_slice(x);
         for (l, ly) in layers.iter().enumerate() {
-            wt.resize(ly.inp * ly.out, 0.0);
-            for o in 0..ly.out {
-                for i in 0..ly.inp {
-                    wt[i * ly.out + o] = params[ly.w + o * ly.inp + i];
-                }
-            }
             let (input, rest) = acts.split_at_mut(l + 1);
             let (xin, y) = (&input[l], &mut rest[0]);
             y.resize(b * ly.out, 0.0);
-            let last = l + 1 == layers.len();
             let bias = &params[ly.b..ly.b + ly.out];
-            for r in 0..b {
-                let yr = &mut y[r * ly.out..(r + 1) * ly.out];
-                yr.copy_from_slice(bias);
-                for (i, &xi) in xin[r * ly.inp..(r + 1) * ly.inp].iter().enumerate() {
-                    for (yo, w) in yr.iter_mut().zip(&wt[i * ly.out..(i + 1) * ly.out]) {
-                        *yo += xi * w;
-                    }
-                }
-                if !last {
-                    match act {
-                        Activation::Tanh => yr.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v)),
-                        Activation::Relu => yr.iter_mut().for_each(|v| *v = v.max(0.0)),
-                    }
+            y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
+            let w = &params[ly.w..ly.w + ly.out * ly.inp];
+            gemm(false, true, b, ly.out, ly.inp, xin, ly.inp, w, ly.inp, 1.0, y, ly.out);
+            if l + 1 < layers.len() {
+                match act {
+                    Activation::Tanh => y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v)),
+                    Activation::Relu => y.iter_mut().for_each(|v| *v = v.max(0.0)),
                 }
             }
         }
     }
 
+    /// Adds the gradient of every layer's parameters, given the gradient `d` with respect to
+    /// the last layer's outputs: per layer `dW += d^T x`, `db +=` the column sums of `d`, and
+    /// `d x W` passed down through the activation.
     fn backward(params: &[f32], grads: &mut [f32], layers: &[Layer], act: Activation, acts: &[Vec<f32>], mut d: Vec<f32>, b: usize) {
         for l in (0..layers.len()).rev() {
             let ly = layers[l];
@@ -165,28 +155,13 @@ impl Fused {
                     };
                 }
             }
-            let x = &acts[l];
-            for r in 0..b {
-                let xr = &x[r * ly.inp..(r + 1) * ly.inp];
-                for o in 0..ly.out {
-                    let g = d[r * ly.out + o];
-                    grads[ly.b + o] += g;
-                    for (gw, xi) in grads[ly.w + o * ly.inp..ly.w + (o + 1) * ly.inp].iter_mut().zip(xr) {
-                        *gw += g * xi;
-                    }
-                }
+            for row in d.chunks_exact(ly.out) {
+                grads[ly.b..ly.b + ly.out].iter_mut().zip(row).for_each(|(g, v)| *g += v);
             }
+            gemm(true, false, ly.out, ly.inp, b, &d, ly.out, &acts[l], ly.inp, 1.0, &mut grads[ly.w..ly.w + ly.out * ly.inp], ly.inp);
             if l > 0 {
                 let mut dx = vec![0.0f32; b * ly.inp];
-                for r in 0..b {
-                    let dxr = &mut dx[r * ly.inp..(r + 1) * ly.inp];
-                    for o in 0..ly.out {
-                        let g = d[r * ly.out + o];
-                        for (a, w) in dxr.iter_mut().zip(&params[ly.w + o * ly.inp..ly.w + (o + 1) * ly.inp]) {
-                            *a += g * w;
-                        }
-                    }
-                }
+                gemm(false, false, b, ly.inp, ly.out, &d, ly.out, &params[ly.w..ly.w + ly.out * ly.inp], ly.inp, 0.0, &mut dx, ly.inp);
                 d = dx;
             }
         }
@@ -208,8 +183,8 @@ impl Fused {
         let ad = self.act_dim;
         let bf = b as f32;
         self.grads.iter_mut().for_each(|g| *g = 0.0);
-        Self::forward(&self.params, &self.actor, self.activation, obs, b, &mut self.acts_a, &mut self.wt);
-        Self::forward(&self.params, &self.critic, self.activation, obs, b, &mut self.acts_c, &mut self.wt);
+        Self::forward(&self.params, &self.actor, self.activation, obs, b, &mut self.acts_a);
+        Self::forward(&self.params, &self.critic, self.activation, obs, b, &mut self.acts_c);
         let mu = self.acts_a.last().expect("output");
         let values = self.acts_c.last().expect("output");
         let ls = &self.params[self.log_std..self.log_std + ad];
@@ -227,11 +202,16 @@ impl Fused {
         let mut d_v = vec![0.0f32; b];
         let mut stats = MinibatchStats::default();
         let (lo, hi) = (1.0 - cfg.clip_coef, 1.0 + cfg.clip_coef);
+        // The standard deviations, once per minibatch (the same values as per sample).
+        let mut std = [0.0f32; 32];
+        for j in 0..ad {
+            std[j] = ls[j].exp();
+        }
         for r in 0..b {
             let mut logp = 0.0f32;
             let mut z = [0.0f32; 32];
             for j in 0..ad {
-                z[j] = (actions[r * ad + j] - mu[r * ad + j]) / ls[j].exp();
+                z[j] = (actions[r * ad + j] - mu[r * ad + j]) / std[j];
                 logp += -0.5 * z[j] * z[j] - ls[j] - half_log_2pi;
             }
             let logratio = logp - old_logp[r];
@@ -246,7 +226,7 @@ impl Fused {
             let d_ratio = if (lo..=hi).contains(&ratio) || pg1 > pg2 { -a / bf } else { 0.0 };
             let d_logp = d_ratio * ratio;
             for j in 0..ad {
-                d_mu[r * ad + j] = d_logp * z[j] / ls[j].exp();
+                d_mu[r * ad + j] = d_logp * z[j] / std[j];
                 d_ls[j] += d_logp * (z[j] * z[j] - 1.0);
             }
             let (v, ret) = (values[r], returns[r]);
