@@ -47,21 +47,31 @@ impl MlpCpu {
         let n = self.layers.len();
         for (li, (wt, bias, inp, outd)) in self.layers.iter().enumerate() {
             let y = &mut next[..*outd];
-            y.copy_from_slice(bias);
-            for (i, &xi) in cur[..*inp].iter().enumerate() {
-                for (yo, w) in y.iter_mut().zip(&wt[i * outd..(i + 1) * outd]) {
-                    *yo += xi * w;
-                }
-            }
-            if li + 1 < n {
-                match self.activation {
-                    Activation::Tanh => y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v)),
-                    Activation::Relu => y.iter_mut().for_each(|v| *v = v.max(0.0)),
-                }
-            }
+            layer(y, &cur[..*inp], wt, bias, li + 1 < n, self.activation == Activation::Tanh);
             std::mem::swap(&mut cur, &mut next);
         }
         out.copy_from_slice(&cur[..self.output_dim()]);
+    }
+}
+
+vectorised! {
+    /// `y = bias + x W` (`wt` is `W^T`, `x.len() x y.len()` row-major), then where `hidden`
+    /// tanh (`tanh`) or the ReLU.
+    fn layer(y: &mut [f32], x: &[f32], wt: &[f32], bias: &[f32], hidden: bool, tanh: bool) {
+        let out = y.len();
+        y.copy_from_slice(bias);
+        for (i, &xi) in x.iter().enumerate() {
+            for (yo, w) in y.iter_mut().zip(&wt[i * out..(i + 1) * out]) {
+                *yo += xi * w;
+            }
+        }
+        if hidden {
+            if tanh {
+                y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v));
+            } else {
+                y.iter_mut().for_each(|v| *v = v.max(0.0));
+            }
+        }
     }
 }
 

@@ -16,7 +16,6 @@
 use tch::Tensor;
 
 use super::bf16::{Precision, gemm_bf16};
-use super::gemm::Kernel;
 use super::gemm::gemm;
 use super::{Activation, FlushDenormals, Mlp};
 
@@ -255,32 +254,6 @@ impl Dense {
     pub fn weight_l2(&self) -> f64 {
         self.layers.iter().flat_map(|l| &self.params[l.w..l.b()]).map(|&w| (w as f64) * (w as f64)).sum()
     }
-}
-
-/// The elementwise passes, each compiled twice, for AVX-512 (where the active [`Kernel`] is
-/// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
-/// passes are independent per element or sum over rows in row order, and Rust neither
-/// reassociates nor fuses multiply-adds.
-macro_rules! vectorised {
-    ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) $body:block) => {
-        $(#[$doc])*
-        pub fn $name($($arg: $ty),*) {
-            #[inline(always)]
-            fn body($($arg: $ty),*) $body
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx512f")]
-                unsafe fn wide($($arg: $ty),*) {
-                    body($($arg),*)
-                }
-                if Kernel::active() == Kernel::Avx512 {
-                    // SAFETY: the variant is active only where the CPU has AVX-512F.
-                    return unsafe { wide($($arg),*) };
-                }
-            }
-            body($($arg),*)
-        }
-    };
 }
 
 vectorised! {

@@ -1,6 +1,34 @@
 //! Neural networks on tch: MLP blocks, the Gaussian actor-critic, the T-REX reward net and
 //! ensembles, and a pure-Rust copy of an MLP for per-step inference in rollouts (one
 //! observation at a time, where libtorch's per-call overhead would dominate).
+/// Elementwise passes, each compiled twice, for AVX-512 (where the active [`gemm::Kernel`] is
+/// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
+/// passes are independent per element or sum over rows in row order, and Rust neither
+/// reassociates nor fuses multiply-adds.
+macro_rules! vectorised {
+    ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) $body:block) => {
+        $(#[$doc])*
+        pub fn $name($($arg: $ty),*) {
+            #[inline(always)]
+            fn body($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx512f")]
+                unsafe fn wide($($arg: $ty),*) {
+                    body($($arg),*)
+                }
+                if $crate::nn::gemm::Kernel::active() == $crate::nn::gemm::Kernel::Avx512 {
+                    // SAFETY: the variant is active only where the CPU has AVX-512F.
+                    return unsafe { wide($($arg),*) };
+                }
+            }
+            body($($arg),*)
+        }
+    };
+}
+
+pub(crate) use vectorised;
+
 pub mod bf16;
 pub mod cpu;
 pub mod dense;

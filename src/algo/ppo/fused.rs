@@ -10,6 +10,7 @@
 use std::collections::HashMap;
 
 use crate::nn::gemm::gemm;
+use crate::nn::vectorised;
 use crate::nn::{Activation, ActorCritic};
 
 #[derive(Debug, Clone, Copy)]
@@ -55,6 +56,33 @@ pub struct Fused {
     steps: i32,
     acts_a: Vec<Vec<f32>>,
     acts_c: Vec<Vec<f32>>,
+}
+
+vectorised! {
+    /// tanh (or, where not `tanh`, the ReLU) in place.
+    fn activate(y: &mut [f32], tanh: bool) {
+        if tanh {
+            y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v));
+        } else {
+            y.iter_mut().for_each(|v| *v = v.max(0.0));
+        }
+    }
+}
+
+vectorised! {
+    /// One Adam step (betas 0.9 and 0.999) on gradients times `scale`: `k` is (scale, the
+    /// learning rate over the first moment's bias correction, the square root of the
+    /// second's, eps).
+    fn adam(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], k: [f32; 4]) {
+        let [scale, step, bc2s, eps] = k;
+        let (b1, b2) = (0.9f32, 0.999f32);
+        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
+            let g = g * scale;
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= step * *m / (v.sqrt() / bc2s + eps);
+        }
+    }
 }
 
 fn tensor_vec(t: &tch::Tensor) -> Vec<f32> {
@@ -133,10 +161,7 @@ impl Fused {
             let w = &params[ly.w..ly.w + ly.out * ly.inp];
             gemm(false, true, b, ly.out, ly.inp, xin, ly.inp, w, ly.inp, 1.0, y, ly.out);
             if l + 1 < layers.len() {
-                match act {
-                    Activation::Tanh => y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v)),
-                    Activation::Relu => y.iter_mut().for_each(|v| *v = v.max(0.0)),
-                }
+                activate(y, act == Activation::Tanh);
             }
         }
     }
@@ -272,12 +297,7 @@ impl Fused {
         let bc2 = 1.0 - b2.powi(self.steps);
         let step = lr / bc1;
         let bc2s = bc2.sqrt();
-        for i in 0..self.params.len() {
-            let g = self.grads[i] * scale;
-            self.m[i] = b1 * self.m[i] + (1.0 - b1) * g;
-            self.v[i] = b2 * self.v[i] + (1.0 - b2) * g * g;
-            self.params[i] -= step * self.m[i] / (self.v[i].sqrt() / bc2s + eps);
-        }
+        adam(&mut self.params, &self.grads, &mut self.m, &mut self.v, [scale, step, bc2s, eps]);
     }
 
     pub fn grads(&self) -> &[f32] {
