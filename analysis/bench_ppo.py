@@ -10,8 +10,9 @@ for SB3, --threads 1 for idrex).
 SB3 is installed on first use (with --no-deps, into ~/.cache/idrex/sb3-2.9.2, next to the
 bootstrap environment's torch and gymnasium); nothing else is changed.
 
-Usage: python analysis/bench_ppo.py [--env HalfCheetah-v5] [--steps 100000] [--idrex PATH]
-Prints one JSON line per library and the ratio.
+Usage: python analysis/bench_ppo.py [--env HalfCheetah-v5] [--steps 100000] [--idrex PATH] [--sb3-only]
+Prints one JSON line per library and the ratio (`--sb3-only`: Stable-Baselines3's line alone,
+as `idrex bench ppo` runs it).
 """
 import argparse
 import json
@@ -26,25 +27,28 @@ p = argparse.ArgumentParser()
 p.add_argument("--env", default="HalfCheetah-v5")
 p.add_argument("--steps", type=int, default=100_000)
 p.add_argument("--idrex", default=None, help="the idrex binary (default: the release build)")
+p.add_argument("--sb3-only", action="store_true", help="time Stable-Baselines3 alone (idrex bench ppo runs it so)")
 args = p.parse_args()
 
 repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-binary = args.idrex
-if binary is None:
-    meta = json.loads(subprocess.check_output(["cargo", "metadata", "--format-version", "1", "--no-deps"], cwd=repo))
-    binary = os.path.join(meta["target_directory"], "release", "idrex")
+idrex_sps = None
+if not args.sb3_only:
+    binary = args.idrex
+    if binary is None:
+        meta = json.loads(subprocess.check_output(["cargo", "metadata", "--format-version", "1", "--no-deps"], cwd=repo))
+        binary = os.path.join(meta["target_directory"], "release", "idrex")
 
-# --- idrex -------------------------------------------------------------------------------
-with tempfile.TemporaryDirectory() as out:
-    start = time.perf_counter()
-    text = subprocess.check_output(
-        [binary, "train", "ppo", "--env", args.env, "--steps", str(args.steps), "--seed", "0", "--out", out,
-         "--eval-every", "0", "--checkpoint-every", "0", "--threads", "1"], text=True)
-    idrex_wall = time.perf_counter() - start
-m = re.search(r"in ([0-9.]+) s \((\d+) steps/s\)", text)
-idrex_sps = float(m.group(2))
-print(json.dumps({"library": "idrex", "env": args.env, "steps": args.steps, "train_s": float(m.group(1)),
-                  "process_wall_s": idrex_wall, "steps_per_s": idrex_sps}))
+    # --- idrex ---------------------------------------------------------------------------
+    with tempfile.TemporaryDirectory() as out:
+        start = time.perf_counter()
+        text = subprocess.check_output(
+            [binary, "train", "ppo", "--env", args.env, "--steps", str(args.steps), "--seed", "0", "--out", out,
+             "--eval-every", "0", "--checkpoint-every", "0", "--threads", "1"], text=True)
+        idrex_wall = time.perf_counter() - start
+    m = re.search(r"in ([0-9.]+) s \((\d+) steps/s\)", text)
+    idrex_sps = float(m.group(2))
+    print(json.dumps({"library": "idrex", "env": args.env, "steps": args.steps, "train_s": float(m.group(1)),
+                      "process_wall_s": idrex_wall, "steps_per_s": idrex_sps}))
 
 # --- Stable-Baselines3 ---------------------------------------------------------------------
 sb3_dir = os.path.expanduser(os.environ.get("IDREX_CACHE", "~/.cache/idrex")) + "/sb3-2.9.2"
@@ -74,4 +78,5 @@ sb3_s = time.perf_counter() - start
 sb3_sps = args.steps / sb3_s
 print(json.dumps({"library": "stable-baselines3 2.9.2", "env": args.env, "steps": args.steps, "train_s": sb3_s,
                   "steps_per_s": sb3_sps}))
-print(json.dumps({"env": args.env, "steps": args.steps, "idrex_vs_sb3": idrex_sps / sb3_sps}))
+if idrex_sps is not None:
+    print(json.dumps({"env": args.env, "steps": args.steps, "idrex_vs_sb3": idrex_sps / sb3_sps}))

@@ -1,5 +1,6 @@
 //! `idrex bench ppo`: a PPO run at CleanRL's settings broken down by phase, next to the
-//! environment's mj_step bound measured in the same run.
+//! environment's mj_step bound and Stable-Baselines3's PPO at the same settings, both
+//! measured in the same run.
 
 use super::env::{env_pass, random_actions, raw_pass};
 use crate::env::{Env, EnvId};
@@ -17,6 +18,26 @@ pub struct PpoBenchArgs {
     pub ground_truth: bool,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Python with torch for the Stable-Baselines3 baseline (`analysis/bench_ppo.py
+    /// --sb3-only`, on the ground-truth reward; default: the bootstrap environment's; "none"
+    /// skips it).
+    #[arg(long)]
+    pub python: Option<String>,
+}
+
+/// Stable-Baselines3's PPO at CleanRL's settings on one thread (its steps per second).
+fn sb3_rate(python: &str, env: EnvId, steps: usize) -> anyhow::Result<f64> {
+    use anyhow::Context;
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("analysis/bench_ppo.py");
+    let out = std::process::Command::new(python)
+        .arg(&script)
+        .args(["--sb3-only", "--env", env.name(), "--steps", &steps.to_string()])
+        .output()
+        .with_context(|| format!("cannot run {python} {}", script.display()))?;
+    anyhow::ensure!(out.status.success(), "{}: {}", script.display(), String::from_utf8_lossy(&out.stderr));
+    let line = String::from_utf8_lossy(&out.stdout).lines().last().unwrap_or_default().to_string();
+    let v: serde_json::Value = serde_json::from_str(&line).context("the Stable-Baselines3 baseline printed no JSON")?;
+    v["steps_per_s"].as_f64().context("the Stable-Baselines3 baseline printed no steps_per_s")
 }
 
 /// The environment's mj_step bound (env steps/s on one thread) over `steps` random steps.
@@ -62,6 +83,9 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
     let run = ppo::train(args.env, &cfg, reward, args.seed, &mut |_| true, None)?;
     let steps = run.curve.last().map_or(0, |p| p.global_step) as f64;
     let p = run.phases;
+    let python = args.python.clone().or_else(super::env::default_python).filter(|p| p != "none");
+    let sb3 = python.map(|py| sb3_rate(&py, args.env, args.steps)).transpose()?;
+    let rate = steps / run.wall_s;
     let phase = |s: f64| serde_json::json!({ "seconds": s, "fraction": s / run.wall_s, "microseconds_per_step": 1e6 * s / steps });
     let out = serde_json::json!({
         "env": args.env.name(),
@@ -71,6 +95,10 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
         "steps_per_s": steps / run.wall_s,
         "mj_bound_env_steps_per_s": bound,
         "fraction_of_bound": steps / run.wall_s / bound,
+        "sb3_steps_per_s": sb3,
+        "ratio_over_sb3": sb3.map(|s| rate / s),
+        "sb3_reward": "ground truth (Stable-Baselines3 has no learned reward)",
+        "runs": 1,
         "phases": {
             "environment": phase(p.env_s),
             "policy_inference": phase(p.policy_s),
