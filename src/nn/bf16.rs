@@ -345,10 +345,7 @@ mod native {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn values(n: usize, k: f32) -> Vec<f32> {
-        (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect()
-    }
+    use crate::nn::gemm::test_values as values;
 
     /// The definition, element by element.
     #[allow(clippy::too_many_arguments)]

@@ -410,13 +410,16 @@ pub fn gemm_with(
     unsafe { product(kernel, m, n, k, av, bv, cv, beta == 1.0) }
 }
 
+/// Test operands of varied sign and magnitude (the products' tests share them).
+#[cfg(test)]
+pub(crate) fn test_values(n: usize, k: f32) -> Vec<f32> {
+    (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect()
+}
+
 #[cfg(test)]
 mod tests {
+    use super::test_values as values;
     use super::*;
-
-    fn values(n: usize, k: f32) -> Vec<f32> {
-        (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect()
-    }
 
     /// The specification, element by element: one `mul_add` chain over the summed dimension.
     #[allow(clippy::too_many_arguments)]
