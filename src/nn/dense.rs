@@ -123,10 +123,6 @@ impl Dense {
         Dense { precision, ..self }
     }
 
-    pub fn precision(&self) -> Precision {
-        self.precision
-    }
-
     /// One product of the passes, at the network's precision.
     #[allow(clippy::too_many_arguments)]
     fn gemm(
