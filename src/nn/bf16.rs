@@ -150,9 +150,11 @@ pub fn gemm_bf16_with(
             c[i * ldc..i * ldc + n].iter_mut().for_each(|v| *v = flush(*v));
         }
     }
-    let _ftz = super::FlushDenormals::new();
     match path {
         Bf16Path::Emulated(kernel) => {
+            // The instruction flushes denormals whatever MXCSR says; the f32 kernel does so
+            // under FTZ and DAZ.
+            let _ftz = super::FlushDenormals::new();
             // The factors rounded, each pair's two terms swapped, an odd k padded: the f32
             // chain over this order is the instruction's.
             let kp = k.div_ceil(2) * 2;

@@ -47,7 +47,10 @@ impl MlpCpu {
         let n = self.layers.len();
         for (li, (wt, bias, inp, outd)) in self.layers.iter().enumerate() {
             let y = &mut next[..*outd];
-            layer(y, &cur[..*inp], wt, bias, li + 1 < n, self.activation == Activation::Tanh);
+            layer(y, &cur[..*inp], wt, bias);
+            if li + 1 < n {
+                super::activate(y, self.activation);
+            }
             std::mem::swap(&mut cur, &mut next);
         }
         out.copy_from_slice(&cur[..self.output_dim()]);
@@ -55,21 +58,13 @@ impl MlpCpu {
 }
 
 vectorised! {
-    /// `y = bias + x W` (`wt` is `W^T`, `x.len() x y.len()` row-major), then where `hidden`
-    /// tanh (`tanh`) or the ReLU.
-    fn layer(y: &mut [f32], x: &[f32], wt: &[f32], bias: &[f32], hidden: bool, tanh: bool) {
+    /// `y = bias + x W` (`wt` is `W^T`, `x.len() x y.len()` row-major).
+    fn layer(y: &mut [f32], x: &[f32], wt: &[f32], bias: &[f32]) {
         let out = y.len();
         y.copy_from_slice(bias);
         for (i, &xi) in x.iter().enumerate() {
             for (yo, w) in y.iter_mut().zip(&wt[i * out..(i + 1) * out]) {
                 *yo += xi * w;
-            }
-        }
-        if hidden {
-            if tanh {
-                y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v));
-            } else {
-                y.iter_mut().for_each(|v| *v = v.max(0.0));
             }
         }
     }

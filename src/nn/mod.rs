@@ -102,6 +102,16 @@ impl Drop for FlushDenormals {
     }
 }
 
+vectorised! {
+    /// The hidden layers' activation, in place (PPO's update and the policy's inference).
+    fn activate(y: &mut [f32], activation: Activation) {
+        match activation {
+            Activation::Tanh => y.iter_mut().for_each(|v| *v = fast_tanh(*v)),
+            Activation::Relu => y.iter_mut().for_each(|v| *v = v.max(0.0)),
+        }
+    }
+}
+
 /// tanh in f32 as a rational minimax approximation (Eigen's `ptanh_float` coefficients):
 /// within a few ulp of `f32::tanh`, branch-free and vectorisable. libm's tanhf (through
 /// expm1f) took a third of a PPO run's time.

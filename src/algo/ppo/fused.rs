@@ -59,17 +59,6 @@ pub struct Fused {
 }
 
 vectorised! {
-    /// tanh (or, where not `tanh`, the ReLU) in place.
-    fn activate(y: &mut [f32], tanh: bool) {
-        if tanh {
-            y.iter_mut().for_each(|v| *v = crate::nn::fast_tanh(*v));
-        } else {
-            y.iter_mut().for_each(|v| *v = v.max(0.0));
-        }
-    }
-}
-
-vectorised! {
     /// One Adam step (betas 0.9 and 0.999) on gradients times `scale`: `k` is (scale, the
     /// learning rate over the first moment's bias correction, the square root of the
     /// second's, eps).
@@ -161,7 +150,7 @@ impl Fused {
             let w = &params[ly.w..ly.w + ly.out * ly.inp];
             gemm(false, true, b, ly.out, ly.inp, xin, ly.inp, w, ly.inp, 1.0, y, ly.out);
             if l + 1 < layers.len() {
-                activate(y, act == Activation::Tanh);
+                crate::nn::activate(y, act);
             }
         }
     }
