@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use tch::nn::OptimizerConfig;
 use tch::{Kind, Tensor};
 
-use crate::data::Trajectory;
+use crate::data::{RunningMeanStd, Trajectory};
 use crate::error::{Error, Result};
 use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
 use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
@@ -33,6 +33,34 @@ pub struct BcConfig {
     /// default, and from the key): train for `iterations`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub early_stopping: Option<EarlyStopping>,
+    /// Which steps validate (and so drive early stopping): `steps` (the default, absent from
+    /// the key), or `tail`.
+    #[serde(skip_serializing_if = "Validation::is_steps")]
+    pub validation: Validation,
+    /// Standardise the observations with the training steps' mean and variance (clipped to
+    /// +-10, stored with the policy as PPO's statistics are); false (the default) is absent
+    /// from the key.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub normalize: bool,
+}
+
+/// The validation steps of [`BcConfig`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Validation {
+    /// A random `val_fraction` of the steps: neighbours of training steps, so it says little
+    /// about over-fitting (the original's split).
+    #[default]
+    Steps,
+    /// The last `val_fraction` of each episode: a contiguous stretch training never sees,
+    /// the nearest to a held-out episode when there is a single demonstration.
+    Tail,
+}
+
+impl Validation {
+    pub fn is_steps(&self) -> bool {
+        *self == Validation::Steps
+    }
 }
 
 /// Early stopping on the validation loss: measured every `every` iterations, training
@@ -57,6 +85,8 @@ impl Default for BcConfig {
             val_fraction: 0.2,
             init: WeightInit::TorchDefault,
             early_stopping: None,
+            validation: Validation::Steps,
+            normalize: false,
         }
     }
 }
@@ -77,6 +107,9 @@ pub struct BcReport {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub iterations_run: Option<usize>,
 }
+
+/// The clip of normalised observations (PPO's too).
+const OBS_CLIP: f64 = 10.0;
 
 fn pairs(trajs: &[Trajectory]) -> (Vec<f32>, Vec<f32>, usize, usize) {
     let (od, ad) = (trajs[0].obs_dim, trajs[0].act_dim);
@@ -115,6 +148,8 @@ pub(crate) struct Data {
     train: Vec<usize>,
     val: Vec<usize>,
     rng: ChaCha8Rng,
+    /// With `normalize`: the training steps' statistics, already applied to `x`.
+    obs_norm: Option<RunningMeanStd>,
 }
 
 impl Data {
@@ -125,21 +160,45 @@ impl Data {
             return Err(Error::Invalid("behavioural cloning needs at least one demonstration step".into()));
         }
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        if let Some(held_out) = held_out {
+        let (x, y, od, ad, train, val) = if let Some(held_out) = held_out {
             let all: Vec<Trajectory> = trajs.iter().chain(held_out).cloned().collect();
             let (x, y, od, ad) = pairs(&all);
             let n_train: usize = trajs.iter().map(Trajectory::len).sum();
             let (train, val) = ((0..n_train).collect(), (n_train..x.len() / od).collect());
-            return Ok(Data { x, y, od, ad, train, val, rng });
+            (x, y, od, ad, train, val)
+        } else {
+            let (x, y, od, ad) = pairs(trajs);
+            let held = |n: usize| (((n as f64) * cfg.val_fraction).round() as usize).min(n.saturating_sub(1));
+            let (train, val) = match cfg.validation {
+                Validation::Steps => {
+                    let mut idx: Vec<usize> = (0..x.len() / od).collect();
+                    idx.shuffle(&mut rng);
+                    let n_val = held(idx.len());
+                    let train = idx.split_off(n_val);
+                    (train, idx)
+                }
+                Validation::Tail => {
+                    let (mut train, mut val, mut first) = (Vec::new(), Vec::new(), 0);
+                    for t in trajs {
+                        let cut = first + t.len() - held(t.len());
+                        train.extend(first..cut);
+                        val.extend(cut..first + t.len());
+                        first += t.len();
+                    }
+                    (train, val)
+                }
+            };
+            (x, y, od, ad, train, val)
+        };
+        let mut data = Data { x, y, od, ad, train, val, rng, obs_norm: None };
+        if cfg.normalize {
+            let mut stats = RunningMeanStd::new(od);
+            let rows: Vec<f32> = data.train.iter().flat_map(|&r| data.x[r * od..(r + 1) * od].iter().copied()).collect();
+            stats.update(&rows);
+            stats.normalize(&mut data.x, OBS_CLIP);
+            data.obs_norm = Some(stats);
         }
-        let (x, y, od, ad) = pairs(trajs);
-        let n = x.len() / od;
-        let mut idx: Vec<usize> = (0..n).collect();
-        idx.shuffle(&mut rng);
-        let n_val = ((n as f64) * cfg.val_fraction).round() as usize;
-        let n_val = n_val.min(n.saturating_sub(1));
-        let train = idx.split_off(n_val);
-        Ok(Data { x, y, od, ad, train, val: idx, rng })
+        Ok(data)
     }
 
     /// The validation loss of the network being trained (mean summed squared error).
@@ -224,7 +283,8 @@ pub fn train_validated(
     device: Device,
 ) -> Result<(ActorCritic, BcReport)> {
     let data = Data::new(trajs, held_out, cfg, seed)?;
-    match device {
+    let obs_norm = data.obs_norm.clone();
+    let (mut policy, report) = match device {
         Device::Cpu => train_dense(data, cfg, seed, workers),
         Device::Cuda => {
             device.ensure_available()?;
@@ -233,7 +293,12 @@ pub fn train_validated(
             }
             train_torch(data, cfg, seed, device.tch())
         }
+    }?;
+    if obs_norm.is_some() {
+        policy.obs_norm = obs_norm;
+        policy.obs_clip = OBS_CLIP;
     }
+    Ok((policy, report))
 }
 
 fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
@@ -391,6 +456,59 @@ mod tests {
             err += a.iter().zip(fresh.action_row(t)).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>();
         }
         assert!(err / (fresh.len() as f64) < 0.05 * baseline);
+    }
+
+    /// With normalised observations the policy carries the statistics it trained with: it
+    /// acts on raw observations like the policy it cloned. The tail split holds out the end
+    /// of every episode.
+    #[test]
+    fn normalised_tail_validated_clone_acts_on_raw_observations() {
+        let mut env = Env::new(EnvId::Hopper).unwrap();
+        let trajs: Vec<_> = (0..20).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let cfg = BcConfig {
+            hidden: vec![64, 64],
+            lr: 1e-3,
+            iterations: 1500,
+            l2: 0.0,
+            normalize: true,
+            validation: Validation::Tail,
+            ..Default::default()
+        };
+        let data = Data::new(&trajs, None, &cfg, 0).unwrap();
+        let held: usize = trajs.iter().map(|t| ((t.len() as f64) * 0.2).round() as usize).sum();
+        assert_eq!(data.val.len(), held);
+        let mut first = 0;
+        for t in &trajs {
+            // Each episode's last steps validate, the rest train.
+            let cut = first + t.len() - ((t.len() as f64) * 0.2).round() as usize;
+            assert!(data.train.contains(&(cut - 1)) && (cut..first + t.len()).all(|r| data.val.contains(&r)));
+            first += t.len();
+        }
+        let (policy, _) = train(&trajs, &cfg, 0, 1, Device::Cpu).unwrap();
+        let stats = policy.obs_norm.clone().expect("normalised BC stores its statistics");
+        let z = |i: usize| (trajs[0].obs_row(0)[i] as f64 - stats.mean[i]) / stats.var[i].sqrt();
+        assert!((0..trajs[0].obs_dim).all(|i| z(i).abs() < 10.0));
+        let baseline: f64 = trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
+            / trajs.iter().map(|t| t.len()).sum::<usize>() as f64;
+        let err_of = |p: &ActorCritic| {
+            let mut clone = PolicyActor::new(p.to_cpu(), false);
+            let fresh = rollout::episode(&mut Env::new(EnvId::Hopper).unwrap(), &mut Linear, 99, Default::default());
+            let mut rng = ChaCha8Rng::seed_from_u64(0);
+            let mut err = 0.0;
+            for t in 0..fresh.len() {
+                let mut a = [0.0f32; 3];
+                clone.act(fresh.obs_row(t), &mut rng, &mut a);
+                err += a.iter().zip(fresh.action_row(t)).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>();
+            }
+            err / fresh.len() as f64
+        };
+        let mut policy = policy;
+        let err = err_of(&policy);
+        assert!(err < 0.05 * baseline, "{err} against {baseline}");
+        // Teeth: the same network fed raw observations is far off.
+        policy.obs_norm = None;
+        let raw = err_of(&policy);
+        assert!(raw > 0.2 * baseline, "{raw} against {baseline}");
     }
 
     /// Every parameter of a policy's actor, flat.

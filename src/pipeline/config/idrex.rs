@@ -131,6 +131,9 @@ impl CloneConfig {
         if self.fidelity_episodes == 0 {
             return Err("idrex.multi_bc.fidelity_episodes is 0; measure each clone on at least 1 episode".into());
         }
+        if self.bc.normalize {
+            return Err("idrex.multi_bc.bc.normalize: clones see their source's statistics; set idrex.multi_bc.normalize instead".into());
+        }
         Ok(())
     }
 }
@@ -149,4 +152,20 @@ pub enum CloneFilter {
     /// sets from independent seeds, which no policy was trained on.
     #[default]
     HeldOutReward,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clone_settings_that_cannot_work_are_refused_with_the_field() {
+        assert!(CloneConfig::default().check().is_ok());
+        let no_episodes = CloneConfig { episodes: 0, ..Default::default() };
+        assert!(no_episodes.check().unwrap_err().contains("idrex.multi_bc.episodes"));
+        // The clones take their source's statistics; their BC standardising again would
+        // train on statistics of statistics.
+        let twice = CloneConfig { bc: BcConfig { normalize: true, ..CloneConfig::default().bc }, ..Default::default() };
+        assert!(twice.check().unwrap_err().contains("idrex.multi_bc.normalize"));
+    }
 }
