@@ -231,6 +231,32 @@ mod native {
             // Converted into a contiguous run first (which vectorises), then spread into the
             // panel's column.
             let full = kc.min((k / 2).saturating_sub(q0));
+            if w == 8 && width == 8 {
+                // Eight lines' runs, then 8 x 8 transposes in registers into the panel.
+                let mut runs = [[0u32; KCP]; 8];
+                for (l, run) in runs.iter_mut().enumerate() {
+                    let line = &x[(first + l) * across + 2 * q0..];
+                    for (r, t) in run[..full].iter_mut().zip(line[..2 * full].chunks_exact(2)) {
+                        *r = pair(t[0], t[1]);
+                    }
+                    if full < kc {
+                        run[full] = pair(line[2 * full], 0.0);
+                    }
+                }
+                let blocks = kc / 8;
+                for blk in 0..blocks {
+                    // SAFETY: 8 runs of at least 8 x blk + 8 pairs; the panel holds kc rows of 8.
+                    unsafe {
+                        crate::nn::gemm::x86::transpose8(runs[0][8 * blk..].as_ptr().cast(), KCP, dst[64 * blk..].as_mut_ptr().cast())
+                    };
+                }
+                for q in 8 * blocks..kc {
+                    for (l, run) in runs.iter().enumerate() {
+                        dst[q * w + l] = run[q];
+                    }
+                }
+                return;
+            }
             let mut run = [0u32; KCP];
             for l in 0..width {
                 let line = &x[(first + l) * across + 2 * q0..];
