@@ -442,12 +442,23 @@ mod tests {
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 1500, l2: 0.0, ..Default::default() };
         let (policy, report) = train(&trajs, &cfg, 0, 1, Device::Cpu).unwrap();
         // Actions are in [-1, 1]; predicting 0 would cost about sum of E[a^2], far above this.
-        let baseline: f64 = trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
-            / trajs.iter().map(|t| t.len()).sum::<usize>() as f64;
+        let baseline = action_energy(&trajs);
         assert!(report.val_loss < 0.05 * baseline, "{report:?}, baseline {baseline}");
         // And it acts like the policy on a fresh episode.
+        assert!(error_on_a_fresh_episode(&policy) < 0.05 * baseline);
+    }
+
+    /// Mean over steps of the summed squared actions: what predicting 0 would cost.
+    fn action_energy(trajs: &[Trajectory]) -> f64 {
+        trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
+            / trajs.iter().map(|t| t.len()).sum::<usize>() as f64
+    }
+
+    /// Mean summed squared difference between `policy`'s actions and [`Linear`]'s on a
+    /// fresh Hopper episode.
+    fn error_on_a_fresh_episode(policy: &ActorCritic) -> f64 {
         let mut clone = PolicyActor::new(policy.to_cpu(), false);
-        let fresh = rollout::episode(&mut env, &mut Linear, 99, Default::default());
+        let fresh = rollout::episode(&mut Env::new(EnvId::Hopper).unwrap(), &mut Linear, 99, Default::default());
         let mut rng = ChaCha8Rng::seed_from_u64(0);
         let mut err = 0.0;
         for t in 0..fresh.len() {
@@ -455,7 +466,7 @@ mod tests {
             clone.act(fresh.obs_row(t), &mut rng, &mut a);
             err += a.iter().zip(fresh.action_row(t)).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>();
         }
-        assert!(err / (fresh.len() as f64) < 0.05 * baseline);
+        err / fresh.len() as f64
     }
 
     /// With normalised observations the policy carries the statistics it trained with: it
@@ -488,26 +499,13 @@ mod tests {
         let stats = policy.obs_norm.clone().expect("normalised BC stores its statistics");
         let z = |i: usize| (trajs[0].obs_row(0)[i] as f64 - stats.mean[i]) / stats.var[i].sqrt();
         assert!((0..trajs[0].obs_dim).all(|i| z(i).abs() < 10.0));
-        let baseline: f64 = trajs.iter().flat_map(|t| t.actions.iter()).map(|&a| (a as f64).powi(2)).sum::<f64>()
-            / trajs.iter().map(|t| t.len()).sum::<usize>() as f64;
-        let err_of = |p: &ActorCritic| {
-            let mut clone = PolicyActor::new(p.to_cpu(), false);
-            let fresh = rollout::episode(&mut Env::new(EnvId::Hopper).unwrap(), &mut Linear, 99, Default::default());
-            let mut rng = ChaCha8Rng::seed_from_u64(0);
-            let mut err = 0.0;
-            for t in 0..fresh.len() {
-                let mut a = [0.0f32; 3];
-                clone.act(fresh.obs_row(t), &mut rng, &mut a);
-                err += a.iter().zip(fresh.action_row(t)).map(|(x, y)| ((x - y) as f64).powi(2)).sum::<f64>();
-            }
-            err / fresh.len() as f64
-        };
+        let baseline = action_energy(&trajs);
         let mut policy = policy;
-        let err = err_of(&policy);
+        let err = error_on_a_fresh_episode(&policy);
         assert!(err < 0.05 * baseline, "{err} against {baseline}");
         // Teeth: the same network fed raw observations is far off.
         policy.obs_norm = None;
-        let raw = err_of(&policy);
+        let raw = error_on_a_fresh_episode(&policy);
         assert!(raw > 0.2 * baseline, "{raw} against {baseline}");
     }
 
