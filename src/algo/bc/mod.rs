@@ -4,13 +4,15 @@
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use tch::nn::OptimizerConfig;
 use tch::{Kind, Tensor};
 
 use crate::data::{RunningMeanStd, Trajectory};
 use crate::error::{Error, Result};
 use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
 use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
+
+mod torch;
+use torch::train_torch;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -273,7 +275,7 @@ pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize, de
 }
 
 /// [`train`], validated on `held_out`'s steps (for example whole episodes the training set
-/// lacks) instead of a fraction of the training steps. Early stopping runs on the CPU path.
+/// lacks) instead of a fraction of the training steps.
 pub fn train_validated(
     trajs: &[Trajectory],
     held_out: Option<&[Trajectory]>,
@@ -288,9 +290,6 @@ pub fn train_validated(
         Device::Cpu => train_dense(data, cfg, seed, workers),
         Device::Cuda => {
             device.ensure_available()?;
-            if cfg.early_stopping.is_some() {
-                return Err(Error::Invalid("bc.early_stopping runs on the CPU only; remove it or set device: cpu".into()));
-            }
             train_torch(data, cfg, seed, device.tch())
         }
     }?;
@@ -299,6 +298,54 @@ pub fn train_validated(
         policy.obs_clip = OBS_CLIP;
     }
     Ok((policy, report))
+}
+
+/// Early stopping's bookkeeping, the same on both paths: the best validation loss measured,
+/// its iteration and a copy of its weights (`W`), and the measurements since.
+struct Stopper<W> {
+    es: Option<EarlyStopping>,
+    best: Option<(f64, usize, W)>,
+    since_best: usize,
+}
+
+impl<W> Stopper<W> {
+    /// Inactive without `bc.early_stopping` or without validation steps.
+    fn new(cfg: &BcConfig, data: &Data) -> Self {
+        Stopper { es: cfg.early_stopping.filter(|_| !data.val.is_empty()), best: None, since_best: 0 }
+    }
+
+    fn active(&self) -> bool {
+        self.es.is_some()
+    }
+
+    /// Whether iteration `it` (before its step) measures the validation loss.
+    fn due(&self, it: usize) -> bool {
+        self.es.is_some_and(|es| it % es.every.max(1) == 0)
+    }
+
+    /// Records the loss measured at `it`; true when `patience` measurements in a row brought
+    /// no new best.
+    fn stop(&mut self, loss: f64, it: usize, weights: impl FnOnce() -> W) -> bool {
+        let Some(es) = self.es else { return false };
+        if self.best.as_ref().is_none_or(|(b, _, _)| loss < *b) {
+            self.best = Some((loss, it, weights()));
+            self.since_best = 0;
+            false
+        } else {
+            self.since_best += 1;
+            self.since_best >= es.patience.max(1)
+        }
+    }
+
+    /// Given the loss at the end of the `ran` iterations: the weights to restore where an
+    /// earlier measurement was at least as good, and the iteration whose weights are kept.
+    fn finish(self, end: Option<f64>, ran: usize) -> (Option<W>, Option<usize>) {
+        match (end, self.best) {
+            (None, _) => (None, None),
+            (Some(v), Some((b, it, w))) if b <= v => (Some(w), Some(it)),
+            (Some(_), _) => (None, Some(ran)),
+        }
+    }
 }
 
 fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
@@ -317,25 +364,12 @@ fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Res
         .collect();
     let batch = cfg.batch_size.min(data.train.len());
     let scale = 2.0 / batch as f32;
-    let stopping = cfg.early_stopping.filter(|_| !data.val.is_empty());
-    // (validation loss, iteration, weights) of the best measurement so far.
-    let mut best: Option<(f64, usize, Vec<f32>)> = None;
-    let (mut since_best, mut out, mut ran) = (0, Vec::new(), cfg.iterations);
+    let mut stopper = Stopper::new(cfg, &data);
+    let (mut out, mut ran) = (Vec::new(), cfg.iterations);
     for it in 0..cfg.iterations {
-        if let Some(es) = stopping
-            && it % es.every.max(1) == 0
-        {
-            let v = data.val_loss(&trainer.net, &mut out);
-            if best.as_ref().is_none_or(|(b, _, _)| v < *b) {
-                best = Some((v, it, trainer.net.params.to_vec()));
-                since_best = 0;
-            } else {
-                since_best += 1;
-                if since_best >= es.patience.max(1) {
-                    ran = it;
-                    break;
-                }
-            }
+        if stopper.due(it) && stopper.stop(data.val_loss(&trainer.net, &mut out), it, || trainer.net.params.to_vec()) {
+            ran = it;
+            break;
         }
         let picks = data.picks(batch);
         let (x, y) = (&data.x, &data.y);
@@ -365,56 +399,17 @@ fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Res
         }
         trainer.step(lanes.iter().map(|l| &l.grads[..]));
     }
-    let mut kept = None;
-    if stopping.is_some() {
-        // The end of training is a measurement too.
-        let v = data.val_loss(&trainer.net, &mut out);
-        match best {
-            Some((b, it, w)) if b <= v => {
-                trainer.net.params.copy_from_slice(&w);
-                trainer.net.refresh();
-                kept = Some(it);
-            }
-            _ => kept = Some(ran),
-        }
+    // The end of training is a measurement too.
+    let end = stopper.active().then(|| data.val_loss(&trainer.net, &mut out));
+    let (restore, kept) = stopper.finish(end, ran);
+    if let Some(w) = restore {
+        trainer.net.params.copy_from_slice(&w);
+        trainer.net.refresh();
     }
     if !trainer.write_to(&policy.actor) {
         return Err(non_finite(cfg));
     }
     let report = BcReport { best_iteration: kept, iterations_run: kept.map(|_| ran), ..data.report(&policy) };
-    Ok((policy, report))
-}
-
-/// The same training through libtorch's autograd and Adam on `dev`: the GPU path. It draws
-/// the same batches from the same generator as the CPU path, and so learns the same policy
-/// up to the order of floating-point sums (`tests::torch_path_follows_the_cpu_path`). The
-/// steps stay on the device and a batch is 128 row indices: the host reads the loss back
-/// only every 100 iterations.
-pub(crate) fn train_torch(mut data: Data, cfg: &BcConfig, seed: u64, dev: tch::Device) -> Result<(ActorCritic, BcReport)> {
-    let mut policy = data.policy(cfg, seed);
-    policy.vs.set_device(dev);
-    let all: Vec<usize> = (0..data.x.len() / data.od).collect();
-    let (xs, ys) = (data.gather(&all, false).to_device(dev), data.gather(&all, true).to_device(dev));
-    let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
-    let _ftz = crate::nn::FlushDenormals::new();
-    let batch = cfg.batch_size.min(data.train.len());
-    for it in 0..cfg.iterations {
-        let picks: Vec<i64> = data.picks(batch).into_iter().map(|r| r as i64).collect();
-        let b = Tensor::from_slice(&picks).to_device(dev);
-        let loss = mse(&policy, &xs.index_select(0, &b), &ys.index_select(0, &b)) + cfg.l2 * policy.actor.weight_l2();
-        if it % 100 == 0 || it + 1 == cfg.iterations {
-            let l = loss.double_value(&[]);
-            if !l.is_finite() {
-                return Err(diverged(it, l, cfg));
-            }
-        }
-        opt.backward_step(&loss);
-    }
-    policy.vs.set_device(tch::Device::Cpu);
-    if !crate::nn::all_finite(&policy.vs) {
-        return Err(non_finite(cfg));
-    }
-    let report = data.report(&policy);
     Ok((policy, report))
 }
 
@@ -507,6 +502,49 @@ mod tests {
         policy.obs_norm = None;
         let raw = error_on_a_fresh_episode(&policy);
         assert!(raw > 0.2 * baseline, "{raw} against {baseline}");
+    }
+
+    /// Uniform random actions: labels no network can predict, so fitting them over-fits.
+    struct Noise;
+    impl Actor for Noise {
+        fn act(&mut self, _obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
+            out.iter_mut().for_each(|o| *o = rng.random_range(-1.0..1.0));
+        }
+    }
+
+    /// On both paths early stopping stops once the validation loss stops improving and keeps
+    /// the best weights: exactly those of a run that trains only up to that iteration (the
+    /// measurements draw nothing from the batch generator).
+    #[test]
+    fn early_stopping_keeps_the_weights_of_the_best_iteration() {
+        let mut env = Env::new(EnvId::Hopper).unwrap();
+        let trajs: Vec<_> = (0..6).map(|s| rollout::episode(&mut env, &mut Noise, s, Default::default())).collect();
+        let cfg = BcConfig {
+            hidden: vec![64, 64],
+            lr: 1e-3,
+            iterations: 3000,
+            batch_size: 32,
+            l2: 0.0,
+            init: WeightInit::Normal002,
+            validation: Validation::Tail,
+            early_stopping: Some(EarlyStopping { every: 20, patience: 5 }),
+            ..Default::default()
+        };
+        type Path = fn(&[Trajectory], &BcConfig) -> (ActorCritic, BcReport);
+        let cpu: Path = |t, c| train(t, c, 5, 1, Device::Cpu).unwrap();
+        let torch: Path = |t, c| train_torch(Data::new(t, None, c, 5).unwrap(), c, 5, tch::Device::Cpu).unwrap();
+        for (name, path) in [("cpu", cpu), ("torch", torch)] {
+            let (kept, report) = path(&trajs, &cfg);
+            let (best, ran) = (report.best_iteration.unwrap(), report.iterations_run.unwrap());
+            assert!(best > 0 && best < ran && ran < cfg.iterations, "{name}: {report:?}");
+            let plain = BcConfig { iterations: best, early_stopping: None, ..cfg.clone() };
+            let (short, short_report) = path(&trajs, &plain);
+            assert_eq!(weights(&kept), weights(&short), "{name}");
+            assert_eq!(report.val_loss, short_report.val_loss, "{name}");
+            // Teeth: training on to where it stopped ends worse on the held-out tail.
+            let (_, longer) = path(&trajs, &BcConfig { iterations: ran, ..plain });
+            assert!(longer.val_loss > report.val_loss, "{name}: {longer:?} against {report:?}");
+        }
     }
 
     /// Every parameter of a policy's actor, flat.
