@@ -36,9 +36,10 @@ pub enum Init {
 /// The initialisation a pipeline file can choose for the BC and reward networks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub enum WeightInit {
-    /// libtorch's default (Kaiming-uniform weights, uniform biases).
+    /// libtorch's default (Kaiming-uniform weights, uniform biases); also read as
+    /// `default`, its name in stage keys.
     #[default]
-    #[serde(rename = "default")]
+    #[serde(rename(serialize = "default", deserialize = "libtorch"), alias = "default")]
     TorchDefault,
     /// N(0, 0.02^2) weights and zero biases, as the original D-REX code.
     #[serde(rename = "normal-0.02")]
@@ -121,5 +122,20 @@ impl Module for Mlp {
             }
         }
         h
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::WeightInit;
+
+    /// `libtorch` is the name a file uses; keys keep spelling it `default`, as they always did.
+    #[test]
+    fn libtorch_init_reads_both_names_and_keys_keep_the_old_one() {
+        for name in ["libtorch", "default"] {
+            assert_eq!(serde_yaml::from_str::<WeightInit>(name).unwrap(), WeightInit::TorchDefault, "{name}");
+        }
+        assert_eq!(serde_json::to_string(&WeightInit::TorchDefault).unwrap(), "\"default\"");
+        assert!(serde_yaml::from_str::<WeightInit>("torch").is_err());
     }
 }
