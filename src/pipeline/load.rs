@@ -173,6 +173,10 @@ impl Pipeline {
         }
         positive(spec.bc.iterations, &["bc", "iterations"], "bc.iterations");
         positive(spec.bc.batch_size, &["bc", "batch_size"], "bc.batch_size");
+        if let Some(bc) = &spec.noise.bc {
+            positive(bc.iterations, &["noise", "bc", "iterations"], "noise.bc.iterations");
+            positive(bc.batch_size, &["noise", "bc", "batch_size"], "noise.bc.batch_size");
+        }
         positive(spec.eval.episodes, &["eval", "episodes"], "eval.episodes");
         positive(spec.noise.rollouts_per_level, &["noise", "rollouts_per_level"], "noise.rollouts_per_level");
         positive(spec.trex.models, &["trex", "models"], "trex.models");

@@ -141,11 +141,17 @@ pub struct NoiseConfig {
     pub schedule: Vec<f64>,
     /// Epsilon-greedy rollouts of BC per level.
     pub rollouts_per_level: usize,
+    /// The BC that D-REX degrades (and iD-REX interpolation starts from). Absent: the `bc`
+    /// stage's policy. Given and different from `bc`, a second BC stage, `drex/bc`: the BC
+    /// baseline can then be the strongest BC while D-REX keeps the one it ranks best from
+    /// (analysis/results/bc-levers/).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bc: Option<BcConfig>,
 }
 
 impl Default for NoiseConfig {
     fn default() -> Self {
-        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5 }
+        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5, bc: None }
     }
 }
 

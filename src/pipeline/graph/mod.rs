@@ -205,6 +205,13 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
     if !wants(Method::Drex) && variants.is_empty() {
         return Ok(g);
     }
+    // D-REX's own BC where the file gives one that differs from the baseline's.
+    let source = match &s.noise.bc {
+        Some(cfg) if *cfg != s.bc => {
+            g.push("drex/bc", Params::Bc(bc::BcParams { env, bc: cfg.clone(), device: p.device }), seed0, vec![io("demos", &demos)])
+        }
+        _ => bc.clone(),
+    };
     let noise = g.push(
         "drex/noise",
         Params::NoiseRollouts(noise::NoiseParams {
@@ -213,7 +220,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             rollouts_per_level: s.noise.rollouts_per_level,
         }),
         seed0,
-        vec![io("policy", &bc)],
+        vec![io("policy", &source)],
     );
     let drex_trex = g.push(
         "drex/trex",
@@ -222,7 +229,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
         vec![io("set0", &noise), io("demos", &demos)],
     );
     let drex_ppo = rl_runs(&mut g, p, Method::Drex, "drex", 1, &drex_trex, &demos);
-    let drex = DrexNodes { demos: &demos, bc: &bc, noise: &noise, trex: &drex_trex, ppo: &drex_ppo };
+    let drex = DrexNodes { demos: &demos, bc: &source, noise: &noise, trex: &drex_trex, ppo: &drex_ppo };
     for v in variants {
         idrex::expand(&mut g, p, v, &drex);
     }
@@ -484,6 +491,35 @@ mod tests {
         assert_eq!(file("cuda").unwrap().device, crate::nn::Device::Cuda);
         let e = file("gpu").unwrap_err().to_string();
         assert!(e.contains("unknown variant `gpu`") && e.contains("`auto`, `cpu`, `cuda`"), "{e}");
+    }
+
+    /// `noise.bc` gives D-REX its own BC: the baseline's BC and its evaluation follow `bc`,
+    /// D-REX and the variants follow `noise.bc`, with the keys a file whose `bc` it is would
+    /// give them (so stored results are reused); equal to `bc`, it adds nothing.
+    #[test]
+    fn noise_bc_separates_drex_source_from_the_baseline() {
+        let parse = |bc: &str, noise_bc: Option<&str>| {
+            let noise_bc = noise_bc.map_or(String::new(), |b| format!("  bc:\n    {b}\n"));
+            let text = format!("version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nbc:\n  {bc}\nnoise:\n  schedule: [0.0, 0.5, 1.0]\n{noise_bc}");
+            expand(&Pipeline::parse(std::path::Path::new("p.yaml"), &text).unwrap()).unwrap()
+        };
+        let (tuned, plain) = ("init: normal-0.02", "init: libtorch");
+        let split = parse(tuned, Some(plain));
+        let (ks, kt, kp) = (split.keys(), parse(tuned, None).keys(), parse(plain, None).keys());
+        assert_eq!(ks["bc"], kt["bc"]);
+        assert_eq!(ks["bc/eval"], kt["bc/eval"]);
+        assert_eq!(ks["drex/bc"], kp["bc"]);
+        for (name, key) in &kp {
+            if name.starts_with("drex/") || name.starts_with("idrex-") {
+                assert_eq!(&ks[name], key, "{name}");
+                assert_ne!(&kt[name], key, "{name}: teeth, the baseline's BC would change it");
+            }
+        }
+        assert_eq!(split.get("drex/noise").unwrap().inputs, vec![("policy".to_string(), "drex/bc".to_string())]);
+        // The same settings twice: one BC stage.
+        let same = parse(plain, Some(plain));
+        assert!(same.get("drex/bc").is_none());
+        assert_eq!(same.keys(), kp);
     }
 
     #[test]
