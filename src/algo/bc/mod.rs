@@ -433,7 +433,7 @@ mod tests {
     #[test]
     fn recovers_a_known_policy_from_its_rollouts() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
-        let trajs: Vec<_> = (0..20).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let trajs = episodes(&mut env, &mut Linear, 20);
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 1500, l2: 0.0, ..Default::default() };
         let (policy, report) = train(&trajs, &cfg, 0, 1, Device::Cpu).unwrap();
         // Actions are in [-1, 1]; predicting 0 would cost about sum of E[a^2], far above this.
@@ -441,6 +441,11 @@ mod tests {
         assert!(report.val_loss < 0.05 * baseline, "{report:?}, baseline {baseline}");
         // And it acts like the policy on a fresh episode.
         assert!(error_on_a_fresh_episode(&policy) < 0.05 * baseline);
+    }
+
+    /// Episodes 0..n of `actor` on `env`, seeded by their index.
+    fn episodes(env: &mut Env, actor: &mut impl Actor, n: u64) -> Vec<Trajectory> {
+        (0..n).map(|s| rollout::episode(env, actor, s, Default::default())).collect()
     }
 
     /// Mean over steps of the summed squared actions: what predicting 0 would cost.
@@ -470,7 +475,7 @@ mod tests {
     #[test]
     fn normalised_tail_validated_clone_acts_on_raw_observations() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
-        let trajs: Vec<_> = (0..20).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let trajs = episodes(&mut env, &mut Linear, 20);
         let cfg = BcConfig {
             hidden: vec![64, 64],
             lr: 1e-3,
@@ -518,7 +523,7 @@ mod tests {
     #[test]
     fn early_stopping_keeps_the_weights_of_the_best_iteration() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
-        let trajs: Vec<_> = (0..6).map(|s| rollout::episode(&mut env, &mut Noise, s, Default::default())).collect();
+        let trajs = episodes(&mut env, &mut Noise, 6);
         let cfg = BcConfig {
             hidden: vec![64, 64],
             lr: 1e-3,
@@ -555,7 +560,7 @@ mod tests {
     #[test]
     fn is_deterministic_for_a_seed() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
-        let trajs: Vec<_> = (0..2).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let trajs = episodes(&mut env, &mut Linear, 2);
         let cfg = BcConfig { hidden: vec![32], iterations: 50, batch_size: 37, ..Default::default() };
         let (pa, a) = train(&trajs, &cfg, 7, 1, Device::Cpu).unwrap();
         // On two threads, with an odd batch whose lanes are unequal: the same bytes.
@@ -574,7 +579,7 @@ mod tests {
     #[test]
     fn torch_path_follows_the_cpu_path() {
         let mut env = Env::new(EnvId::Hopper).unwrap();
-        let trajs: Vec<_> = (0..3).map(|s| rollout::episode(&mut env, &mut Linear, s, Default::default())).collect();
+        let trajs = episodes(&mut env, &mut Linear, 3);
         let cfg = BcConfig { hidden: vec![64, 64], lr: 1e-3, iterations: 300, batch_size: 50, ..Default::default() };
         let (dense, dr) = train(&trajs, &cfg, 3, 1, Device::Cpu).unwrap();
         let (torch, tr) = train_torch(Data::new(&trajs, None, &cfg, 3).unwrap(), &cfg, 3, tch::Device::Cpu).unwrap();
