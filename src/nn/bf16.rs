@@ -247,7 +247,7 @@ mod native {
                 for blk in 0..blocks {
                     // SAFETY: 8 runs of at least 8 x blk + 8 pairs; the panel holds kc rows of 8.
                     unsafe {
-                        crate::nn::gemm::x86::transpose8(runs[0][8 * blk..].as_ptr().cast(), KCP, dst[64 * blk..].as_mut_ptr().cast())
+                        crate::nn::gemm::x86::transpose8(runs[0][8 * blk..].as_ptr().cast(), KCP, dst[64 * blk..].as_mut_ptr().cast(), 8)
                     };
                 }
                 for q in 8 * blocks..kc {

@@ -13,6 +13,8 @@
 //! into a fixed partition ([`LANES`]) whose gradients it sums in a fixed order, whatever the
 //! number of threads that compute them.
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
+use std::ops::Range;
+
 use tch::Tensor;
 
 use super::bf16::{Precision, gemm_bf16};
@@ -148,19 +150,8 @@ impl Dense {
 
     /// Rewrites the transposed weights from the parameters: call after changing them.
     pub fn refresh(&mut self) {
-        // In 16 x 16 blocks, whose rows stay in L1 on both sides.
-        const B: usize = 16;
         for l in &self.layers {
-            let (w, wt) = (&self.params[l.w..l.b()], &mut self.wt[l.w..l.b()]);
-            for o0 in (0..l.out).step_by(B) {
-                for i0 in (0..l.inp).step_by(B) {
-                    for o in o0..(o0 + B).min(l.out) {
-                        for i in i0..(i0 + B).min(l.inp) {
-                            wt[i * l.out + o] = w[o * l.inp + i];
-                        }
-                    }
-                }
-            }
+            transpose_rows(&self.params[l.w..l.b()], l.inp, l.out, 0..l.inp, &mut self.wt[l.w..l.b()]);
         }
     }
 
@@ -252,6 +243,33 @@ impl Dense {
     }
 }
 
+/// Rows `rows` of the transpose (`inp x out`) of the `out x inp` row-major `w`, written to
+/// `dst` (those rows, `out` apart): `dst[(i - rows.start) * out + o] = w[o * inp + i]`.
+/// Register transposes of 8 x 8 blocks where the processor has AVX; bit moves either way.
+fn transpose_rows(w: &[f32], inp: usize, out: usize, rows: Range<usize>, dst: &mut [f32]) {
+    let (i0, n) = (rows.start, rows.len());
+    assert!(rows.end <= inp && w.len() >= inp * out && dst.len() >= n * out);
+    #[cfg(target_arch = "x86_64")]
+    let (bi, bo) = if std::arch::is_x86_feature_detected!("avx") { (n - n % 8, out - out % 8) } else { (0, 0) };
+    #[cfg(not(target_arch = "x86_64"))]
+    let (bi, bo) = (0, 0);
+    #[cfg(target_arch = "x86_64")]
+    for r in (0..bi).step_by(8) {
+        for o in (0..bo).step_by(8) {
+            // SAFETY: AVX is present; rows o..o + 8 of w hold elements i0 + r..i0 + r + 8, and
+            // dst's rows r..r + 8 hold columns o..o + 8 (the extents asserted above).
+            unsafe { super::gemm::x86::transpose8(w.as_ptr().add(o * inp + i0 + r), inp, dst.as_mut_ptr().add(r * out + o), out) };
+        }
+    }
+    // The edges the blocks leave: the last columns of the blocks' rows, then the last rows.
+    for r in 0..n {
+        let from = if r < bi { bo } else { 0 };
+        for o in from..out {
+            dst[r * out + o] = w[o * inp + i0 + r];
+        }
+    }
+}
+
 vectorised! {
     /// `y = y + bias` on every row, then the ReLU where `relu`.
     fn add_bias(y: &mut [f32], bias: &[f32], relu: bool) {
@@ -295,6 +313,7 @@ vectorised! {
     }
 }
 
+#[cfg(test)]
 vectorised! {
     /// `a += b`, elementwise.
     fn add_into(a: &mut [f32], b: &[f32]) {
@@ -309,6 +328,23 @@ vectorised! {
     fn adam_update(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
         let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
         for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
+            *m = b1 * *m + (1.0 - b1) * g;
+            *v = b2 * *v + (1.0 - b2) * g * g;
+            *p -= step * *m / (v.sqrt() / bc2s + eps);
+        }
+    }
+}
+
+vectorised! {
+    /// [`adam_update`] on the gradient `g0 + g1` (two lanes' sums), plus `l2 * params` where
+    /// `weights`: the bits of summing into a buffer, adding the L2 term and updating, one
+    /// pass instead of four.
+    #[allow(clippy::too_many_arguments)]
+    fn adam_update_lanes(params: &mut [f32], g0: &[f32], g1: &[f32], weights: bool, l2: f32, m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
+        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
+        for ((((p, &g0), &g1), m), v) in params.iter_mut().zip(g0).zip(g1).zip(m.iter_mut()).zip(v.iter_mut()) {
+            let sum = g0 + g1;
+            let g = if weights { sum + l2 * *p } else { sum };
             *m = b1 * *m + (1.0 - b1) * g;
             *v = b2 * *v + (1.0 - b2) * g * g;
             *p -= step * *m / (v.sqrt() / bc2s + eps);
@@ -331,10 +367,14 @@ impl Adam {
     }
 
     pub fn step(&mut self, params: &mut [f32], grads: &[f32]) {
-        self.t += 1;
-        let step = self.lr / (1.0 - 0.9f32.powi(self.t));
-        let bc2s = (1.0 - 0.999f32.powi(self.t)).sqrt();
+        let (step, bc2s) = self.advance();
         adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
+    }
+
+    /// Counts a step; its step size and the square root of its second bias correction.
+    fn advance(&mut self) -> (f32, f32) {
+        self.t += 1;
+        (self.lr / (1.0 - 0.9f32.powi(self.t)), (1.0 - 0.999f32.powi(self.t)).sqrt())
     }
 }
 
@@ -343,7 +383,6 @@ impl Adam {
 pub struct Trainer {
     pub net: Dense,
     adam: Adam,
-    grads: Buf,
     pool: LanePool,
     l2: f32,
     _ftz: FlushDenormals,
@@ -355,8 +394,8 @@ impl Trainer {
     pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize, precision: Precision) -> Self {
         let _ftz = FlushDenormals::new();
         let net = Dense::from_mlp(mlp).with_precision(precision);
-        let (adam, grads) = (Adam::new(net.len(), lr), Buf::zeros(net.len()));
-        Trainer { net, adam, grads, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
+        let adam = Adam::new(net.len(), lr);
+        Trainer { net, adam, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
     }
 
     /// Runs `f(lane, share, net)` for each of the [`LANES`] lanes, with the lane's share of
@@ -368,14 +407,37 @@ impl Trainer {
         self.pool.run(lanes, |lane, k| f(lane, batch.get(k * per..((k + 1) * per).min(batch.len())).unwrap_or(&[]), net));
     }
 
-    /// One Adam step on the lanes' gradients summed in lane order, plus the L2 term's.
+    /// One Adam step on the lanes' gradients summed in lane order, plus the L2 term's, then
+    /// the transposed weights rewritten: both on the lane threads, split by parameters (then
+    /// by transposed rows), elementwise, so the split changes no bit. On the calling thread
+    /// alone they left BC's second thread idle much of each iteration.
     pub fn step<'a>(&mut self, lane_grads: impl IntoIterator<Item = &'a [f32]>) {
-        let mut lanes = lane_grads.into_iter();
-        self.grads.copy_from_slice(lanes.next().expect("at least one lane"));
-        lanes.for_each(|g| add_into(&mut self.grads, g));
-        self.net.add_weight_l2(self.l2, &mut self.grads);
-        self.adam.step(&mut self.net.params, &self.grads);
-        self.net.refresh();
+        const _: () = assert!(LANES == 2, "adam_update_lanes sums two lanes");
+        let lanes: Vec<&[f32]> = lane_grads.into_iter().collect();
+        let [g0, g1] = lanes[..] else { panic!("one gradient per lane") };
+        let (step, bc2s) = self.adam.advance();
+        let l2 = 2.0 * self.l2;
+        let Dense { layers, params, wt, .. } = &mut self.net;
+        // Each layer's weights, then its biases, in the parameters' order.
+        let ranges: Vec<(Range<usize>, bool)> = layers.iter().flat_map(|l| [(l.w..l.b(), true), (l.b()..l.b() + l.out, false)]).collect();
+        let mut shares = AdamShare::split(params, &mut self.adam.m, &mut self.adam.v);
+        self.pool.run(&mut shares, |share, _| {
+            for (r, weights) in &ranges {
+                let (a, b) = (r.start.max(share.start), r.end.min(share.start + share.params.len()));
+                if a < b {
+                    let at = a - share.start..b - share.start;
+                    let (p, m, v) = (&mut share.params[at.clone()], &mut share.m[at.clone()], &mut share.v[at]);
+                    adam_update_lanes(p, &g0[a..b], &g1[a..b], *weights, l2, m, v, step, bc2s);
+                }
+            }
+        });
+        let params = &params[..];
+        let mut shares = TransposeShare::split(layers, wt);
+        self.pool.run(&mut shares, |share, _| {
+            for t in share.iter_mut() {
+                transpose_rows(&params[t.layer.w..t.layer.b()], t.layer.inp, t.layer.out, t.rows.clone(), t.dst);
+            }
+        });
     }
 
     /// Writes the parameters back into `mlp`; false (writing nothing) if any is not finite.
@@ -385,6 +447,61 @@ impl Trainer {
             self.net.write_to(mlp);
         }
         finite
+    }
+}
+
+/// A lane's share of an Adam step: the parameters from `start` on, with their moments.
+struct AdamShare<'a> {
+    start: usize,
+    params: &'a mut [f32],
+    m: &'a mut [f32],
+    v: &'a mut [f32],
+}
+
+impl<'a> AdamShare<'a> {
+    /// [`LANES`] consecutive shares, all but the last a multiple of 16 floats long.
+    fn split(mut params: &'a mut [f32], mut m: &'a mut [f32], mut v: &'a mut [f32]) -> Vec<Self> {
+        let per = params.len().div_ceil(LANES).next_multiple_of(16);
+        (0..LANES)
+            .map(|k| {
+                let take = per.min(params.len());
+                let (p, p_rest) = std::mem::take(&mut params).split_at_mut(take);
+                let (mk, m_rest) = std::mem::take(&mut m).split_at_mut(take);
+                let (vk, v_rest) = std::mem::take(&mut v).split_at_mut(take);
+                (params, m, v) = (p_rest, m_rest, v_rest);
+                AdamShare { start: k * per, params: p, m: mk, v: vk }
+            })
+            .collect()
+    }
+}
+
+/// Rows `rows` of `layer`'s transposed weight, to be written to `dst`.
+struct TransposeShare<'a> {
+    layer: Layer,
+    rows: Range<usize>,
+    dst: &'a mut [f32],
+}
+
+impl<'a> TransposeShare<'a> {
+    /// Per lane, its consecutive part of every layer's rows of `wt` (laid out as the
+    /// parameters).
+    fn split(layers: &[Layer], mut wt: &'a mut [f32]) -> Vec<Vec<Self>> {
+        let mut shares: Vec<Vec<Self>> = (0..LANES).map(|_| Vec::new()).collect();
+        let mut at = 0;
+        for &layer in layers {
+            // Skip the previous layer's bias slots.
+            wt = &mut std::mem::take(&mut wt)[layer.w - at..];
+            at = layer.w;
+            let per = layer.inp.div_ceil(LANES);
+            for (k, share) in shares.iter_mut().enumerate() {
+                let rows = (k * per).min(layer.inp)..((k + 1) * per).min(layer.inp);
+                let (dst, rest) = std::mem::take(&mut wt).split_at_mut(rows.len() * layer.out);
+                wt = rest;
+                at += rows.len() * layer.out;
+                share.push(TransposeShare { layer, rows, dst });
+            }
+        }
+        shares
     }
 }
 
@@ -502,6 +619,41 @@ mod tests {
         assert_eq!(grads.len(), want.len());
         for (i, (g, w)) in grads.iter().zip(&want).enumerate() {
             assert!((g - w).abs() < 1e-4 * (1.0 + w.abs()), "parameter {i}: {g} vs {w}");
+        }
+    }
+
+    /// The trainer's step (fused, split over the lane threads) gives the bits of the passes
+    /// it replaced, one after another on one thread: sum the lanes into a buffer, add the
+    /// L2 term, Adam, transpose. Widths off the 8 x 8 blocks and an odd split included.
+    #[test]
+    fn step_gives_the_bits_of_the_separate_passes() {
+        tch::manual_seed(11);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let mlp = Mlp::new(&vs.root(), &[17, 40, 29, 6], Activation::Relu, Init::Default);
+        for threads in [1, 2] {
+            let mut trainer = Trainer::new(&mlp, 1e-2, 0.01, threads, Precision::F32);
+            let mut want = Dense::from_mlp(&mlp);
+            let mut adam = Adam::new(want.len(), 1e-2);
+            for t in 0..3 {
+                let g0 = crate::nn::gemm::test_values(want.len(), 0.37 + t as f32);
+                let g1 = crate::nn::gemm::test_values(want.len(), 0.53 + t as f32);
+                let mut grads = g0.clone();
+                add_into(&mut grads, &g1);
+                want.add_weight_l2(0.01, &mut grads);
+                adam.step(&mut want.params, &grads);
+                want.refresh();
+                trainer.step([&g0[..], &g1[..]]);
+                assert_eq!(bits(&trainer.net.params), bits(&want.params), "threads {threads}, step {t}: parameters");
+                assert_eq!(bits(&trainer.net.wt), bits(&want.wt), "threads {threads}, step {t}: transposed weights");
+                assert_eq!((bits(&trainer.adam.m), bits(&trainer.adam.v)), (bits(&adam.m), bits(&adam.v)));
+            }
+        }
+        // And the transposes are transposes, every element.
+        let d = Dense::from_mlp(&mlp);
+        for l in &d.layers {
+            for (o, i) in (0..l.out).flat_map(|o| (0..l.inp).map(move |i| (o, i))) {
+                assert_eq!(d.wt[l.w + i * l.out + o].to_bits(), d.params[l.w + o * l.inp + i].to_bits());
+            }
         }
     }
 

@@ -244,7 +244,7 @@ unsafe fn pack(dst: &mut Vec<f32>, kc: usize, cols: usize, w: usize, src: View) 
                 for blk in 0..blocks {
                     // SAFETY: 8 columns of 8 elements from row 8 x blk lie inside the block;
                     // the panel holds rows 8 x blk .. 8 x blk + 8 of 8 elements.
-                    unsafe { x86::transpose8(at(8 * blk, 0), src.cs, panel[64 * blk..].as_mut_ptr()) };
+                    unsafe { x86::transpose8(at(8 * blk, 0), src.cs, panel[64 * blk..].as_mut_ptr(), 8) };
                 }
                 blocks * 8
             } else {

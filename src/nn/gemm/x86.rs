@@ -3,10 +3,11 @@
 use std::arch::x86_64::*;
 
 /// Writes the 8 x 8 block whose column `j` starts at `src + j * stride` (8 contiguous
-/// elements) as 8 rows of 8 contiguous elements at `dst`: row `p` holds element `p` of
-/// every column. Bit moves only, so it copies any 32-bit values exactly (bf16 pairs too).
+/// elements) as 8 rows of 8 contiguous elements, `dst_stride` apart from `dst`: row `p`
+/// holds element `p` of every column. Bit moves only, so it copies any 32-bit values
+/// exactly (bf16 pairs too).
 #[target_feature(enable = "avx")]
-pub(in crate::nn) unsafe fn transpose8(src: *const f32, stride: usize, dst: *mut f32) {
+pub(in crate::nn) unsafe fn transpose8(src: *const f32, stride: usize, dst: *mut f32, dst_stride: usize) {
     // SAFETY (all): the caller's extents.
     let r: [__m256; 8] = std::array::from_fn(|j| unsafe { _mm256_loadu_ps(src.add(j * stride)) });
     let t = [
@@ -31,8 +32,8 @@ pub(in crate::nn) unsafe fn transpose8(src: *const f32, stride: usize, dst: *mut
     ];
     for p in 0..4 {
         unsafe {
-            _mm256_storeu_ps(dst.add(8 * p), _mm256_permute2f128_ps::<0x20>(u[p], u[p + 4]));
-            _mm256_storeu_ps(dst.add(8 * (p + 4)), _mm256_permute2f128_ps::<0x31>(u[p], u[p + 4]));
+            _mm256_storeu_ps(dst.add(dst_stride * p), _mm256_permute2f128_ps::<0x20>(u[p], u[p + 4]));
+            _mm256_storeu_ps(dst.add(dst_stride * (p + 4)), _mm256_permute2f128_ps::<0x31>(u[p], u[p + 4]));
         }
     }
 }
