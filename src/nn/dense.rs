@@ -230,7 +230,9 @@ impl Dense {
         }
     }
 
-    /// Adds the gradient of `coef * sum of squared weights` (not biases) to `grads`.
+    /// Adds the gradient of `coef * sum of squared weights` (not biases) to `grads`: the
+    /// separate pass [`Trainer::step`] fuses, kept as the tests' reference.
+    #[cfg(test)]
     pub fn add_weight_l2(&self, coef: f32, grads: &mut [f32]) {
         for l in &self.layers {
             axpy(2.0 * coef, &self.params[l.w..l.b()], &mut grads[l.w..l.b()]);
@@ -306,6 +308,7 @@ vectorised! {
     }
 }
 
+#[cfg(test)]
 vectorised! {
     /// `y += a x`.
     fn axpy(a: f32, x: &[f32], y: &mut [f32]) {
@@ -321,6 +324,7 @@ vectorised! {
     }
 }
 
+#[cfg(test)]
 vectorised! {
     /// One Adam update of `params` from `grads`, with moments `m` and `v`, step size `step`
     /// (the learning rate over the first moment's bias correction) and `bc2s`, the square
@@ -366,6 +370,9 @@ impl Adam {
         Adam { lr: lr as f32, m: Buf::zeros(len), v: Buf::zeros(len), t: 0 }
     }
 
+    /// One update from a summed gradient: the separate pass [`Trainer::step`] fuses, kept
+    /// as the tests' reference.
+    #[cfg(test)]
     pub fn step(&mut self, params: &mut [f32], grads: &[f32]) {
         let (step, bc2s) = self.advance();
         adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
@@ -418,16 +425,16 @@ impl Trainer {
         let (step, bc2s) = self.adam.advance();
         let l2 = 2.0 * self.l2;
         let Dense { layers, params, wt, .. } = &mut self.net;
-        // Each layer's weights, then its biases, in the parameters' order.
-        let ranges: Vec<(Range<usize>, bool)> = layers.iter().flat_map(|l| [(l.w..l.b(), true), (l.b()..l.b() + l.out, false)]).collect();
         let mut shares = AdamShare::split(params, &mut self.adam.m, &mut self.adam.v);
+        let layers = &layers[..];
         self.pool.run(&mut shares, |share, _| {
-            for (r, weights) in &ranges {
+            // Each layer's weights, then its biases, in the parameters' order.
+            for (r, weights) in layers.iter().flat_map(|l| [(l.w..l.b(), true), (l.b()..l.b() + l.out, false)]) {
                 let (a, b) = (r.start.max(share.start), r.end.min(share.start + share.params.len()));
                 if a < b {
                     let at = a - share.start..b - share.start;
                     let (p, m, v) = (&mut share.params[at.clone()], &mut share.m[at.clone()], &mut share.v[at]);
-                    adam_update_lanes(p, &g0[a..b], &g1[a..b], *weights, l2, m, v, step, bc2s);
+                    adam_update_lanes(p, &g0[a..b], &g1[a..b], weights, l2, m, v, step, bc2s);
                 }
             }
         });
