@@ -127,23 +127,155 @@ pub fn probability_of_improvement(x: &[f64], y: &[f64]) -> f64 {
     wins / (x.len() * y.len()) as f64
 }
 
-/// A 95 % bootstrap interval of [`probability_of_improvement`] over paired replicates
-/// (`pairs[r]` = (X, Y) on replicate r): each resample draws replicates with replacement and
-/// keeps both methods' scores of a drawn replicate together, since they share its BC policy
-/// and D-REX reward.
-pub fn probability_of_improvement_ci(pairs: &[(f64, f64)], resamples: usize, seed: u64) -> (f64, f64) {
+/// P(X >= k) for X ~ Binomial(n, p).
+fn binomial_upper_tail(k: usize, n: usize, p: f64) -> f64 {
+    if k == 0 {
+        return 1.0;
+    }
+    // Terms by their logarithms: n up to thousands without overflow.
+    let ln_choose = |i: usize| -> f64 { (1..=i).map(|j| ((n - i + j) as f64 / j as f64).ln()).sum() };
+    (k..=n)
+        .map(|i| {
+            let ln = ln_choose(i) + i as f64 * p.ln() + (n - i) as f64 * (1.0 - p).ln();
+            if p == 0.0 {
+                f64::from(u8::from(i == 0))
+            } else if p == 1.0 {
+                f64::from(u8::from(i == n))
+            } else {
+                ln.exp()
+            }
+        })
+        .sum::<f64>()
+        .min(1.0)
+}
+
+/// The one-sided sign test of "X beats Y more often than not" from `wins` of `n` paired
+/// replicates (ties dropped before): P(at least `wins` of `n` under a fair coin).
+pub fn sign_test_p(wins: usize, n: usize) -> f64 {
+    if n == 0 { f64::NAN } else { binomial_upper_tail(wins, n, 0.5) }
+}
+
+/// The lower end of the two-sided 95 % Clopper-Pearson interval of a win rate seen as `wins`
+/// of `n`: the p at which P(X >= wins) = 2.5 % (0 when `wins` is 0). 5 of 5 gives 0.478.
+pub fn clopper_pearson_lower(wins: usize, n: usize) -> f64 {
+    if n == 0 {
+        return f64::NAN;
+    }
+    if wins == 0 {
+        return 0.0;
+    }
+    // The tail grows with p: bisect.
+    let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if binomial_upper_tail(wins, n, mid) < 0.025 { lo = mid } else { hi = mid }
+    }
+    0.5 * (lo + hi)
+}
+
+/// "k of n replicates above Y", with what k of n can show: the one-sided sign test and the
+/// 95 % Clopper-Pearson lower bound on the rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WinCount {
+    pub k: usize,
+    pub n: usize,
+}
+
+impl WinCount {
+    pub fn fraction(self) -> f64 {
+        self.k as f64 / self.n as f64
+    }
+
+    pub fn sign_p(self) -> f64 {
+        sign_test_p(self.k, self.n)
+    }
+
+    pub fn lower(self) -> f64 {
+        clopper_pearson_lower(self.k, self.n)
+    }
+}
+
+impl std::fmt::Display for WinCount {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} of {} (p = {:.3}, rate ≥ {:.2})", self.k, self.n, self.sign_p(), self.lower())
+    }
+}
+
+/// A 95 % interval of [`probability_of_improvement`] by rliable's independent bootstrap
+/// (`StratifiedIndependentBootstrap` with one task): X's and Y's scores are resampled
+/// separately, each with replacement, and the percentile interval taken.
+pub fn probability_of_improvement_independent_ci(x: &[f64], y: &[f64], resamples: usize, seed: u64) -> (f64, f64) {
     use rand::{Rng, SeedableRng};
-    if pairs.is_empty() {
+    if x.is_empty() || y.is_empty() {
         return (f64::NAN, f64::NAN);
     }
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut draw = |v: &[f64]| -> Vec<f64> { (0..v.len()).map(|_| v[rng.random_range(0..v.len())]).collect() };
     let stats = (0..resamples.max(1))
         .map(|_| {
-            let (x, y): (Vec<f64>, Vec<f64>) = (0..pairs.len()).map(|_| pairs[rng.random_range(0..pairs.len())]).unzip();
-            probability_of_improvement(&x, &y)
+            let (a, b) = (draw(x), draw(y));
+            probability_of_improvement(&a, &b)
         })
         .collect();
     percentile_interval(stats)
+}
+
+/// X against Y over replicates, two ways. rliable's probability of improvement compares
+/// every replicate of X with every one of Y, as if unpaired; its interval resamples each
+/// side independently. Where replicate r of both shares its seeds (and so its BC and
+/// rankings), the paired form counts the replicates where X beats Y: a win rate with its
+/// exact (Clopper-Pearson) interval and a one-sided sign test, which do not claim more than
+/// n coin flips can show.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Improvement {
+    /// rliable's statistic, and its independent-bootstrap 95 % interval.
+    pub unpaired: f64,
+    pub unpaired_ci: (f64, f64),
+    /// Replicates where X scored above Y, and of the `pairs`, those that tied (dropped
+    /// from the rate and the test).
+    pub wins: usize,
+    pub ties: usize,
+    pub pairs: usize,
+    /// The two-sided 95 % Clopper-Pearson interval of the win rate over untied pairs.
+    pub paired_ci: (f64, f64),
+    /// P(at least `wins` wins under a fair coin).
+    pub sign_p: f64,
+}
+
+impl Improvement {
+    /// From (X, Y) on each shared replicate.
+    pub fn of(pairs: &[(f64, f64)], resamples: usize, seed: u64) -> Self {
+        let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
+        let wins = pairs.iter().filter(|(a, b)| a > b).count();
+        let ties = pairs.iter().filter(|(a, b)| a == b).count();
+        let n = pairs.len() - ties;
+        Improvement {
+            unpaired: probability_of_improvement(&x, &y),
+            unpaired_ci: probability_of_improvement_independent_ci(&x, &y, resamples, seed),
+            wins,
+            ties,
+            pairs: pairs.len(),
+            paired_ci: (clopper_pearson_lower(wins, n), 1.0 - clopper_pearson_lower(n - wins, n)),
+            sign_p: sign_test_p(wins, n),
+        }
+    }
+
+    /// The win rate over untied pairs.
+    pub fn paired(&self) -> f64 {
+        self.wins as f64 / (self.pairs - self.ties) as f64
+    }
+
+    /// What the reader must know before trusting the figures, or None.
+    pub fn warning(&self) -> Option<String> {
+        let mut w = Vec::new();
+        if self.pairs < 10 {
+            w.push(format!("only {} replicates", self.pairs));
+        }
+        if self.unpaired_ci.0 == self.unpaired_ci.1 {
+            w.push("every pair agrees, so the bootstrap interval is a point".to_string());
+        }
+        (!w.is_empty()).then(|| w.join("; "))
+    }
 }
 
 /// Spearman rank correlation (average ranks for ties).
@@ -249,10 +381,43 @@ mod tests {
         let (lo, hi) = hierarchical_ci(&[vec![0.0, 10.0], vec![5.0, 5.0]], |m| mean(m).unwrap(), 10_000, 0);
         assert!(lo < 5.0 && hi > 5.0, "{lo} {hi}");
         assert_eq!(bootstrap_ci(&[5.0, 5.0], 1000, 0), (5.0, 5.0));
-        // Every X above every Y: 1 in every resample. Paired replicates keep their pair:
-        // X = Y + 1 on each, so every resample has P in (0.5, 1].
-        assert_eq!(probability_of_improvement_ci(&[(10.0, 1.0), (20.0, 3.0)], 1000, 0), (1.0, 1.0));
-        let (lo, hi) = probability_of_improvement_ci(&[(1.0, 0.0), (3.0, 2.0), (5.0, 4.0)], 10_000, 0);
-        assert!(lo > 0.5 && hi == 1.0, "{lo} {hi}");
+    }
+
+    /// The issue's figures: 5 of 5 gives p = 1/32 and a lower bound of 0.025^(1/5); 4 of 4,
+    /// 1/16 and 0.025^(1/4); and scipy's `binomtest(7, 10).proportion_ci()` low end.
+    #[test]
+    fn sign_test_and_clopper_pearson_by_hand() {
+        assert!((sign_test_p(5, 5) - 1.0 / 32.0).abs() < 1e-12);
+        assert!((sign_test_p(4, 4) - 1.0 / 16.0).abs() < 1e-12);
+        assert!((sign_test_p(8, 10) - 56.0 / 1024.0).abs() < 1e-12);
+        assert_eq!(sign_test_p(0, 3), 1.0);
+        assert!((clopper_pearson_lower(5, 5) - 0.025_f64.powf(0.2)).abs() < 1e-9);
+        assert!((clopper_pearson_lower(4, 4) - 0.025_f64.powf(0.25)).abs() < 1e-9);
+        assert!((clopper_pearson_lower(7, 10) - 0.34754715).abs() < 1e-6);
+        assert_eq!(clopper_pearson_lower(0, 10), 0.0);
+    }
+
+    /// Five of five: rliable's interval is the point [1, 1] (every resample agrees), the
+    /// paired one is not: a rate of at least 0.48, p = 1/32, and a warning on both counts.
+    #[test]
+    fn a_clean_sweep_on_five_replicates_is_weak_evidence() {
+        let pairs: Vec<(f64, f64)> = (0..5).map(|i| (10.0 + i as f64, i as f64)).collect();
+        let imp = Improvement::of(&pairs, 10_000, 0);
+        assert_eq!((imp.unpaired, imp.unpaired_ci), (1.0, (1.0, 1.0)));
+        assert_eq!((imp.wins, imp.ties, imp.pairs, imp.paired()), (5, 0, 5, 1.0));
+        assert!((imp.paired_ci.0 - 0.4782).abs() < 1e-3 && imp.paired_ci.1 == 1.0, "{:?}", imp.paired_ci);
+        assert!((imp.sign_p - 1.0 / 32.0).abs() < 1e-12);
+        let w = imp.warning().unwrap();
+        assert!(w.contains("only 5 replicates") && w.contains("a point"), "{w}");
+        // Ties leave the rate and the test.
+        let imp = Improvement::of(&[(1.0, 1.0), (2.0, 1.0), (0.0, 1.0)], 1000, 0);
+        assert_eq!((imp.wins, imp.ties, imp.paired()), (1, 1, 0.5));
+        // Independent resampling: the estimate lies inside its interval, unlike the paired
+        // bootstrap's [0.16, 0.32] around 0.32 in issue 38.
+        let x = [1.0, 5.0, 2.0, 8.0, 3.0];
+        let y = [4.0, 6.0, 0.0, 7.0, 9.0];
+        let (lo, hi) = probability_of_improvement_independent_ci(&x, &y, 10_000, 0);
+        let p = probability_of_improvement(&x, &y);
+        assert!(lo < p && p < hi, "{lo} {p} {hi}");
     }
 }

@@ -2,6 +2,7 @@
 mod util;
 
 mod bootstrap;
+mod defaults;
 mod docs;
 mod env_cli;
 mod env_equivalence;
@@ -9,3 +10,4 @@ mod layout;
 mod pipeline;
 mod recording;
 mod reliability;
+mod rliable;

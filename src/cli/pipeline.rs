@@ -67,6 +67,14 @@ pub struct RunArgs {
     /// Recompute these nodes even if stored (repeatable).
     #[arg(long)]
     pub force: Vec<String>,
+    /// Run only this replicate of the file's (its stages' keys are those of the whole file's
+    /// run), so that a long study lands one replicate at a time.
+    #[arg(long, value_name = "R")]
+    pub only_replicate: Option<usize>,
+    /// Evaluate on a locked test set's seeds anyway (see `role: test`); the report marks
+    /// these results as exploratory.
+    #[arg(long)]
+    pub reuse_test_set: bool,
     /// Where the Rerun recording goes (default: recordings/<pipeline>-<env>.rrd).
     #[arg(long)]
     pub recording: Option<PathBuf>,
@@ -251,17 +259,62 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// One line: what the run will do, and how long it should take here (estimated from the
+/// store's stage times where it has them, else the reference machine's; see
+/// [`crate::pipeline::schedule`]).
+fn intent(p: &Pipeline, manifests: &[crate::store::Manifest], g: &crate::pipeline::Graph, opts: &runner::RunOptions) -> String {
+    use crate::pipeline::schedule::{Estimates, makespan};
+    let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
+    let keys = g.keys();
+    let todo = |n: &crate::pipeline::Node| !present.contains(keys[&n.name].as_str()) || opts.force.contains(&n.name);
+    let est = Estimates::from_manifests(manifests);
+    let wall = makespan(g, &|n| if todo(n) { est.seconds(n) } else { 0.0 }, opts.jobs.max(1));
+    let kinds: std::collections::BTreeSet<_> = g.nodes.iter().filter(|n| todo(n)).map(|n| n.kind()).collect();
+    let source =
+        if kinds.iter().all(|k| est.measured(*k)) { "this store's stage times" } else { "the 2-core reference machine's stage times" };
+    let methods: Vec<&str> = p.spec.methods.iter().map(|m| m.label()).collect();
+    let envs: Vec<&str> = p.envs.iter().map(|e| e.name()).collect();
+    let replicates = if p.is_replicated() { format!(", {} replicates", p.replicates.len()) } else { String::new() };
+    let to_compute = g.nodes.iter().filter(|n| todo(n)).count();
+    format!(
+        "{}: {} on {}, {} RL runs per method, K = {}{replicates}: {} stages, {to_compute} to compute; about {} with {} jobs (from {source})",
+        p.name,
+        methods.join(", "),
+        envs.join(", "),
+        p.spec.seeds.len(),
+        p.spec.iterations,
+        g.nodes.len(),
+        runner::minutes(wall),
+        opts.jobs
+    )
+}
+
 fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Write)?;
+    let p = match args.only_replicate {
+        Some(r) => p.only_replicate(r).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
+        None => p,
+    };
     let g = expand(&p)?;
+    let manifests = store.unverified_manifests()?;
+    let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
+    let looks = crate::pipeline::test_set::Looks::new(&manifests);
+    let test_set = crate::pipeline::test_set::check(&p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
+        if test_set.is_some() {
+            bail!(
+                "{}: a test set's evaluations are marked in their manifests, which Slurm jobs do not write yet; run it locally",
+                args.file.display()
+            );
+        }
         return submit(args, &p, &store, &g);
     }
     // Before any stage runs: a pipeline planned for CUDA on a machine without it.
     p.device.ensure_available().map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
     tracing::info!("BC, T-REX and the learned reward compute on {}", p.device.name());
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true };
+    let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true, test_set };
+    println!("{}", intent(&p, &manifests, &g, &opts));
     let started = std::time::Instant::now();
     let body = |n: &crate::pipeline::Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
     let outcomes = runner::run(&g, &store, &opts, &body)?;

@@ -36,11 +36,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let mut comparisons = Vec::new();
     for pair in &args.compare {
-        use crate::report::studies;
+        use crate::report::comparisons;
         let Some((study, baseline)) = pair.split_once(':') else {
             bail!("--compare {pair}: give STUDY:BASELINE, two study names of the report joined by a colon");
         };
-        let rows = studies::compare(&t.aggregate, study, baseline);
+        let rows = comparisons::compare(&t.aggregate, study, baseline);
         if rows.is_empty() {
             let mut names: Vec<&str> = t.aggregate.iter().map(|a| a.study.as_str()).collect();
             names.sort_unstable();
@@ -60,8 +60,11 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             crate::report::write_csv(&mut crate::report::studies::improvement_frame(&t.improvement)?, &args.out.join("improvement.csv"))?;
         }
         if !comparisons.is_empty() {
-            let mut frame = crate::report::studies::comparison_frame(&comparisons)?;
+            let mut frame = crate::report::comparisons::comparison_frame(&comparisons)?;
             crate::report::write_csv(&mut frame, &args.out.join("comparisons.csv"))?;
+        }
+        if !t.looks.is_empty() {
+            crate::report::write_csv(&mut crate::report::looks::frame(&t.looks)?, &args.out.join("looks.csv"))?;
         }
         if !t.clones.is_empty() {
             crate::report::write_csv(&mut crate::report::clones::frame(&t.clones)?, &args.out.join("clones.csv"))?;
@@ -72,7 +75,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let md = format!(
         "{}{}{notes}{}",
         crate::report::markdown(&t),
-        crate::report::studies::comparison_markdown(&comparisons),
+        crate::report::comparisons::comparison_markdown(&comparisons),
         crate::report::figures::markdown(&figures, "figures")
     );
     if args.format != ReportFormat::Csv {

@@ -28,7 +28,7 @@ pub mod walker2d;
 pub use vec_env::{VecEnv, VecStep};
 
 /// The environments idrex knows, by their Gymnasium ids.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub enum EnvId {
     #[serde(rename = "HalfCheetah-v5")]
     HalfCheetah,

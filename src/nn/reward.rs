@@ -68,7 +68,9 @@ pub enum CtrlAction {
     Raw,
 }
 
-/// Where each member's reward is centred and scaled for RL.
+/// Where each member's reward is centred and scaled for RL. A pipeline file's default is
+/// `RankedFloor` (`RewardSettings`); the enum's `Default`, `Running`, is what a stage key that
+/// does not name a level means (keys from before the level existed).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum RewardLevel {

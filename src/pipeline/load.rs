@@ -236,8 +236,8 @@ impl Pipeline {
         if !(spec.reward.disagreement.is_finite() && spec.reward.disagreement >= 0.0) {
             bad(&["reward", "disagreement"], format!("reward.disagreement is {}; give k >= 0 (0: no brake)", spec.reward.disagreement));
         }
-        if let Some(q) = spec.reward.ceiling.filter(|q| !(*q > 0.0 && *q <= 1.0)) {
-            bad(&["reward", "ceiling"], format!("reward.ceiling is {q}; give a quantile in (0, 1], e.g. 0.9"));
+        if let Some(q) = spec.reward.ceiling.quantile().filter(|q| !(*q > 0.0 && *q <= 1.0)) {
+            bad(&["reward", "ceiling"], format!("reward.ceiling is {q}; give a quantile in (0, 1], e.g. 0.75, or `none` for no cap"));
         }
         if let Err(e) = spec.idrex.multi_bc.check() {
             bad(&["idrex", "multi_bc"], e);
@@ -287,7 +287,7 @@ impl Pipeline {
             ctrl_action: spec.reward.ctrl_action,
             level: spec.reward.level,
             disagreement: spec.reward.disagreement,
-            ceiling: spec.reward.ceiling,
+            ceiling: spec.reward.ceiling.quantile(),
         };
         let device = spec.device.resolve();
         let replicates = first_replicate..first_replicate + replicates;
@@ -316,6 +316,14 @@ impl Pipeline {
     /// (node names then start with the replicate's, `r3/`).
     pub fn is_replicated(&self) -> bool {
         self.replicates != (0..1)
+    }
+
+    /// This pipeline cut to its replicate `r` alone (the same keys as in the whole run).
+    pub fn only_replicate(self, r: usize) -> std::result::Result<Pipeline, String> {
+        if !self.replicates.contains(&r) {
+            return Err(format!("the file's replicates are {}..={}; give one of them", self.replicates.start, self.replicates.end - 1));
+        }
+        Ok(Pipeline { replicates: r..r + 1, ..self })
     }
 
     /// Replicate `r` of this pipeline: every stage's seed moved by [`replicate_seed`].

@@ -6,8 +6,8 @@
 //! The layers, lowest first (each imports only those before it): [`kind`] (the stage kinds'
 //! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
 //! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG),
-//! [`schedule`] and [`cores`] (ordering and threads), [`runner`], [`slurm`], [`recompute`]
-//! and [`plots`].
+//! [`schedule`] and [`cores`] (ordering and threads), [`test_set`] (locked test sets),
+//! [`runner`], [`slurm`], [`recompute`] and [`plots`].
 pub mod config;
 pub mod cores;
 pub mod graph;
@@ -19,6 +19,7 @@ pub mod runner;
 pub mod schedule;
 pub mod slurm;
 pub mod stage;
+pub mod test_set;
 
 pub use config::Method;
 pub use graph::{Graph, Node, expand};

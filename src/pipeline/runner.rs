@@ -12,7 +12,7 @@ use serde_json::Value;
 use super::graph::{Graph, Node};
 use super::stage::StageCtx;
 use crate::error::{Error, Result};
-use crate::store::{Manifest, Store, now_unix};
+use crate::store::{Manifest, Store, TestSetMark, now_unix};
 
 /// A running stage whose amount of work is unknown: a spinner and the time it has taken.
 /// (A bar would read 0/0 and look finished.) Messages are cut at the terminal's width.
@@ -49,6 +49,8 @@ pub struct RunOptions {
     /// Nodes to recompute even if stored.
     pub force: Vec<String>,
     pub progress: bool,
+    /// Written into the manifest of every evaluation computed ([`super::test_set`]).
+    pub test_set: Option<TestSetMark>,
 }
 
 pub type StageBody = dyn Fn(&Node, &StageCtx) -> Result<Value> + Sync;
@@ -67,7 +69,7 @@ pub fn run_one(
     let bar = if progress { ProgressBar::new(0) } else { ProgressBar::hidden() };
     bar.set_style(working_style());
     bar.set_prefix(node.name.clone());
-    let s = run_node(node, key, inputs, store, false, threads, &bar, body);
+    let s = run_node(node, key, inputs, store, (false, None), threads, &bar, body);
     bar.finish_and_clear();
     s
 }
@@ -77,7 +79,7 @@ fn run_node(
     key: &str,
     inputs: BTreeMap<String, String>,
     store: &Store,
-    forced: bool,
+    (forced, mark): (bool, Option<&TestSetMark>),
     threads: usize,
     bar: &ProgressBar,
     body: &StageBody,
@@ -130,6 +132,7 @@ fn run_node(
             wall_s,
             idrex_version: env!("CARGO_PKG_VERSION").to_string(),
             kernel: Some(node.params.cpu_path()),
+            test_set: mark.filter(|_| node.kind() == super::stage::StageKind::Eval).cloned(),
         };
         store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })
@@ -146,6 +149,11 @@ fn run_node(
             Status::Failed { error: e.to_string(), log }
         }
     }
+}
+
+/// A duration for people: seconds under a minute, else whole minutes.
+pub fn minutes(seconds: f64) -> String {
+    if seconds < 60.0 { format!("{:.0} s", seconds.max(0.0)) } else { format!("{:.0} min", seconds / 60.0) }
 }
 
 pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
@@ -174,8 +182,24 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     let stage_style = working_style();
 
     let mut status: BTreeMap<String, Status> = BTreeMap::new();
-    // Running stage -> the cores it was granted.
+    // Running stage -> the cores it was granted, and when it started.
     let mut running: BTreeMap<String, usize> = BTreeMap::new();
+    let mut since: BTreeMap<String, Instant> = BTreeMap::new();
+    // Seconds taken and estimated by the stages computed so far: how far off the estimates
+    // are on this machine today.
+    let (mut taken, mut estimated) = (0.0, 0.0);
+    let left = |status: &BTreeMap<String, Status>, since: &BTreeMap<String, Instant>, scale: f64| {
+        let cost = |n: &Node| {
+            if status.contains_key(&n.name) || (present.contains(keys[&n.name].as_str()) && !opts.force.contains(&n.name)) {
+                0.0
+            } else {
+                let est = estimates.seconds(n) * scale;
+                since.get(&n.name).map_or(est, |t| (est - t.elapsed().as_secs_f64()).max(0.0))
+            }
+        };
+        super::schedule::makespan(graph, &cost, opts.jobs.max(1))
+    };
+    overall.set_message(format!("about {} left", minutes(left(&status, &since, 1.0))));
     let (tx, rx) = mpsc::channel::<(String, Status)>();
     std::thread::scope(|scope| {
         loop {
@@ -213,6 +237,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                 let n = *n;
                 tracing::debug!(stage = %n.name, threads, "starting");
                 running.insert(n.name.clone(), threads);
+                since.insert(n.name.clone(), Instant::now());
                 let key = keys[&n.name].clone();
                 let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
                 let forced = opts.force.contains(&n.name);
@@ -222,7 +247,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                 bar.enable_steady_tick(std::time::Duration::from_millis(200));
                 let tx = tx.clone();
                 scope.spawn(move || {
-                    let s = run_node(n, &key, inputs, store, forced, threads, &bar, body);
+                    let s = run_node(n, &key, inputs, store, (forced, opts.test_set.as_ref()), threads, &bar, body);
                     bar.finish_and_clear();
                     let _ = tx.send((n.name.clone(), s));
                 });
@@ -243,8 +268,15 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             if let Some(line) = line.filter(|_| opts.progress) {
                 if multi.is_hidden() { eprintln!("{line}") } else { multi.println(line).ok().unwrap_or(()) }
             }
+            if let (Status::Computed { wall_s }, Some(n)) = (&s, graph.get(&name)) {
+                taken += wall_s;
+                estimated += estimates.seconds(n);
+            }
+            since.remove(&name);
             overall.inc(1);
             status.insert(name, s);
+            let scale = if estimated > 0.0 { (taken / estimated).clamp(0.25, 4.0) } else { 1.0 };
+            overall.set_message(format!("about {} left", minutes(left(&status, &since, scale))));
         }
     });
     overall.finish_and_clear();
@@ -274,7 +306,7 @@ mod tests {
     }
 
     fn opts(force: &[&str]) -> RunOptions {
-        RunOptions { jobs: 2, force: force.iter().map(|s| s.to_string()).collect(), progress: false }
+        RunOptions { jobs: 2, force: force.iter().map(|s| s.to_string()).collect(), progress: false, test_set: None }
     }
 
     fn value(store: &Store, o: &Outcome) -> String {

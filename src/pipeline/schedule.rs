@@ -118,6 +118,35 @@ pub fn critical_path(g: &Graph, cost: &dyn Fn(&Node) -> f64) -> (Vec<String>, f6
     (path, total)
 }
 
+/// The estimated wall time of `g` run `jobs` stages at a time, each stage taking `cost`
+/// seconds, started critical path first as the runner starts them: a list schedule.
+pub fn makespan(g: &Graph, cost: &dyn Fn(&Node) -> f64, jobs: usize) -> f64 {
+    let rem = remaining(g, cost);
+    let mut done: BTreeMap<&str, f64> = BTreeMap::new();
+    let mut started = std::collections::BTreeSet::new();
+    // (finish time, node) of the running stages.
+    let mut running: Vec<(f64, &str)> = Vec::new();
+    let mut now = 0.0;
+    loop {
+        let mut ready: Vec<&Node> = g
+            .nodes
+            .iter()
+            .filter(|n| !started.contains(n.name.as_str()))
+            .filter(|n| n.inputs.iter().all(|(_, i)| done.get(i.as_str()).is_some_and(|&t| t <= now)))
+            .collect();
+        ready.sort_by(|a, b| rem[&b.name].total_cmp(&rem[&a.name]));
+        for n in ready.into_iter().take(jobs.max(1).saturating_sub(running.len())) {
+            started.insert(n.name.as_str());
+            running.push((now + cost(n).max(0.0), n.name.as_str()));
+        }
+        let Some(first) = (0..running.len()).min_by(|&a, &b| running[a].0.total_cmp(&running[b].0)) else { break };
+        let (t, name) = running.swap_remove(first);
+        now = t;
+        done.insert(name, t);
+    }
+    now
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -147,5 +176,20 @@ mod tests {
         assert_eq!(path.iter().map(|p| cost(g.get(p).unwrap())).sum::<f64>(), total);
         // Two T-REX trainings lie on it (D-REX's, then iD-REX's), as in the paper's DAG.
         assert!(path.iter().filter(|p| g.get(p).unwrap().kind() == StageKind::Trex).count() >= 2, "{path:?}");
+    }
+
+    #[test]
+    fn the_makespan_lies_between_the_critical_path_and_the_serial_time() {
+        let g = graph();
+        let cost = |n: &Node| if n.kind() == StageKind::Trex { 10.0 } else { 1.0 };
+        let serial: f64 = g.nodes.iter().map(cost).sum();
+        let (_, path) = critical_path(&g, &cost);
+        assert_eq!(makespan(&g, &cost, 1), serial);
+        let two = makespan(&g, &cost, 2);
+        assert!(two >= path && two >= serial / 2.0 && two < serial, "{two} against {path} and {serial}");
+        // With a job per node, only the critical path is left.
+        assert_eq!(makespan(&g, &cost, g.nodes.len()), path);
+        // Stored nodes cost nothing.
+        assert_eq!(makespan(&g, &|_| 0.0, 2), 0.0);
     }
 }

@@ -7,8 +7,13 @@
 //! bootstrap confidence interval over runs.
 use std::collections::BTreeMap;
 
+pub mod answer;
 pub mod clones;
+pub mod comparisons;
 pub mod figures;
+pub mod improvement;
+pub mod looks;
+mod notes;
 mod protocols;
 pub mod studies;
 
@@ -23,6 +28,7 @@ use crate::store::{Manifest, Store};
 
 pub use crate::pipeline::stage::eval::{Selection, select};
 use protocols::RESAMPLES;
+pub use notes::notes;
 pub use protocols::{Protocol, ProtocolRow, protocols_frame};
 use protocols::{RunEval, protocol_rows, protocols_markdown};
 
@@ -211,6 +217,10 @@ pub struct Tables {
     pub improvement: Vec<studies::ImprovementRow>,
     /// Multi-BC's clones against their sources.
     pub clones: Vec<clones::CloneRow>,
+    /// (env, table) -> the demonstrations' returns.
+    pub demo_returns: BTreeMap<(String, String), Vec<f64>>,
+    /// How often each study's seeds were looked at.
+    pub looks: Vec<looks::LookRow>,
 }
 
 pub fn build(store: &Artifacts) -> Result<Tables> {
@@ -269,62 +279,18 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         .sort(["env", "pipeline", "method"], Default::default())
         .collect()
         .map_err(pe)?;
-    Ok(Tables { returns, protocols, runs, demos, accuracy, aggregate, improvement, clones: clones::rows(store) })
-}
-
-/// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
-/// accuracy, and what multi-BC's clone filter kept (when it keeps none, multi-BC's reward is
-/// trained on D-REX's rankings alone, and its results equal D-REX's).
-pub fn notes(store: &Artifacts) -> Result<String> {
-    let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
-    let mut seen = std::collections::BTreeSet::new();
-    for m in store.iter() {
-        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
-        let Some(reward) = m.inputs.get("reward") else { continue };
-        if !seen.insert((p.pipeline.clone(), reward.clone())) {
-            continue;
-        }
-        let Some(rm) = store.get(reward) else { continue };
-        let group = lines.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
-        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(rm) {
-            let label = if p.iteration > 2 { format!("{} (k={})", p.method.label(), p.iteration) } else { p.method.label().to_string() };
-            group.insert(format!(
-                "{label}: the learned reward ({}) ranks {:.1} % of held-out training pairs correctly; on its training set Pearson {:.2}",
-                rm.node,
-                t.val_accuracy * 100.0,
-                t.train_set.pearson
-            ));
-        }
-        for (role, key) in &rm.inputs {
-            if let (true, Some(sm)) = (role.starts_with("set"), store.get(key))
-                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
-            {
-                let kept = x.kept();
-                let fidelity: Vec<String> = x.clones.iter().map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
-                let mut line = format!(
-                    "{}: the clone filter kept {kept} of {} clones; their fidelity (true return, random 0, source 1) {}",
-                    sm.node,
-                    x.clones.len(),
-                    fidelity.join(", ")
-                );
-                if kept == 0 {
-                    line.push_str("; with none kept, multi-BC's reward saw D-REX's rankings only, so its figures repeat D-REX's");
-                }
-                group.insert(line);
-            }
-        }
-    }
-    let mut out = String::new();
-    if !lines.is_empty() {
-        out.push_str("\n## Notes\n");
-        for ((env, pipeline), group) in lines {
-            out.push_str(&format!("\n### {env} {pipeline}\n\n"));
-            for l in group {
-                out.push_str(&format!("- {l}\n"));
-            }
-        }
-    }
-    Ok(out)
+    Ok(Tables {
+        returns,
+        protocols,
+        runs,
+        demos,
+        accuracy,
+        aggregate,
+        improvement,
+        clones: clones::rows(store),
+        demo_returns: long.demo_returns,
+        looks: looks::rows(store),
+    })
 }
 
 /// A figure with one decimal; never "NaN" (a figure that could not be computed says so).
@@ -342,9 +308,11 @@ fn cell_s(df: &DataFrame, name: &str, i: usize) -> String {
     df.column(name).ok().and_then(|c| c.str().ok().and_then(|s| s.get(i).map(str::to_string))).unwrap_or_default()
 }
 
-/// The paper-style markdown: one row per (env, pipeline).
+/// The paper-style markdown, the answer first: one row per (env, pipeline).
 pub fn markdown(t: &Tables) -> String {
-    let mut out = studies::markdown(&t.aggregate, &t.improvement);
+    let mut out = answer::markdown(&t.protocols, &t.aggregate, &t.demo_returns, &t.looks);
+    out.push_str(&looks::markdown(&t.looks));
+    out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
     out.push_str("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
     out.push_str("| env | pipeline | demos avg | demos best | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|---|---|\n");
     let mut rows: Vec<(String, String)> =

@@ -14,7 +14,7 @@ use polars::prelude::*;
 use super::{Protocol, ProtocolRow, RESAMPLES, num, pe};
 use crate::error::Result;
 use crate::pipeline::Method;
-use crate::stats::{hierarchical_ci, iqm, mean, median, probability_of_improvement, probability_of_improvement_ci};
+use crate::stats::{Improvement, WinCount, hierarchical_ci, iqm, mean, median};
 
 /// One (env, study, method, protocol) over its replicates.
 #[derive(Debug, Clone, PartialEq)]
@@ -31,9 +31,9 @@ pub struct AggregateRow {
     pub median: f64,
     pub mean_ci: (f64, f64),
     pub iqm_ci: (f64, f64),
-    /// The fraction of replicates whose score is above their demonstrations' average, and best.
-    pub above_demos_avg: f64,
-    pub above_demos_best: f64,
+    /// The replicates whose score is above their demonstrations' average, and best.
+    pub above_demos_avg: WinCount,
+    pub above_demos_best: WinCount,
     /// Each replicate's score, in replicate order.
     pub scores: Vec<(usize, f64)>,
 }
@@ -46,10 +46,8 @@ pub struct ImprovementRow {
     pub protocol: Protocol,
     pub method: String,
     pub baseline: String,
-    /// Replicates where both were evaluated.
-    pub replicates: usize,
-    pub probability: f64,
-    pub ci: (f64, f64),
+    /// Over the replicates where both were evaluated.
+    pub improvement: Improvement,
 }
 
 fn mean_of(v: &[f64]) -> f64 {
@@ -82,7 +80,7 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
                 .zip(&scores)
                 .filter_map(|(r, s)| demos.get(&(env.to_string(), r.pipeline.clone())).map(|d| *s > pick(d)))
                 .collect();
-            judged.iter().filter(|&&b| b).count() as f64 / judged.len().max(1) as f64
+            WinCount { k: judged.iter().filter(|&&b| b).count(), n: judged.len() }
         };
         out.push(AggregateRow {
             env: env.into(),
@@ -112,16 +110,13 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
                 continue;
             };
             let pairs = paired(a, b);
-            let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
             improvement.push(ImprovementRow {
                 env: a.env.clone(),
                 study: a.study.clone(),
                 protocol: a.protocol,
                 method: a.method.clone(),
                 baseline: baseline.into(),
-                replicates: pairs.len(),
-                probability: probability_of_improvement(&x, &y),
-                ci: probability_of_improvement_ci(&pairs, RESAMPLES, 2),
+                improvement: Improvement::of(&pairs, RESAMPLES, 2),
             });
         }
     }
@@ -129,110 +124,8 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
 }
 
 /// The two rows' scores on the replicates both have, replicate by replicate.
-fn paired(a: &AggregateRow, b: &AggregateRow) -> Vec<(f64, f64)> {
+pub(super) fn paired(a: &AggregateRow, b: &AggregateRow) -> Vec<(f64, f64)> {
     a.scores.iter().filter_map(|(r, x)| b.scores.iter().find(|(rb, _)| rb == r).map(|(_, y)| (*x, *y))).collect()
-}
-
-/// One method in two studies over the replicates both ran (`idrex report --compare
-/// STUDY:BASELINE`): paired by replicate, since replicate r of two studies on the same seeds
-/// shares its seeds and every stage the two files do not change (its rewards, where only
-/// PPO's settings differ).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ComparisonRow {
-    pub env: String,
-    pub protocol: Protocol,
-    pub method: String,
-    pub study: String,
-    pub baseline: String,
-    /// Replicates both studies evaluated.
-    pub replicates: usize,
-    /// Their mean scores over those replicates.
-    pub study_mean: f64,
-    pub baseline_mean: f64,
-    /// Replicates where the study scored above the baseline.
-    pub above: usize,
-    /// P(study > baseline) over those replicates, with its 95 % interval resampling them.
-    pub probability: f64,
-    pub ci: (f64, f64),
-}
-
-/// Every (env, protocol, method) that both studies aggregate, compared on their shared
-/// replicates.
-pub fn compare(rows: &[AggregateRow], study: &str, baseline: &str) -> Vec<ComparisonRow> {
-    rows.iter()
-        .filter(|a| a.study == study)
-        .filter_map(|a| {
-            let b = rows.iter().find(|b| b.study == baseline && b.env == a.env && b.protocol == a.protocol && b.method == a.method)?;
-            let pairs = paired(a, b);
-            if pairs.is_empty() {
-                return None;
-            }
-            let (x, y): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
-            Some(ComparisonRow {
-                env: a.env.clone(),
-                protocol: a.protocol,
-                method: a.method.clone(),
-                study: study.into(),
-                baseline: baseline.into(),
-                replicates: pairs.len(),
-                study_mean: mean_of(&x),
-                baseline_mean: mean_of(&y),
-                above: pairs.iter().filter(|(a, b)| a > b).count(),
-                probability: probability_of_improvement(&x, &y),
-                ci: probability_of_improvement_ci(&pairs, RESAMPLES, 3),
-            })
-        })
-        .collect()
-}
-
-/// `comparisons.csv`: one row per (env, protocol, method, study, baseline).
-pub fn comparison_frame(rows: &[ComparisonRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&ComparisonRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&ComparisonRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    DataFrame::new_infer_height(vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
-        Column::new("method".into(), s(&|r| r.method.clone())),
-        Column::new("study".into(), s(&|r| r.study.clone())),
-        Column::new("baseline".into(), s(&|r| r.baseline.clone())),
-        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
-        Column::new("study_mean".into(), x(&|r| r.study_mean)),
-        Column::new("baseline_mean".into(), x(&|r| r.baseline_mean)),
-        Column::new("above".into(), rows.iter().map(|r| r.above as u64).collect::<Vec<_>>()),
-        Column::new("probability".into(), x(&|r| r.probability)),
-        Column::new("ci_low".into(), x(&|r| r.ci.0)),
-        Column::new("ci_high".into(), x(&|r| r.ci.1)),
-    ])
-    .map_err(pe)
-}
-
-/// The comparisons' section of `report.md`.
-pub fn comparison_markdown(rows: &[ComparisonRow]) -> String {
-    if rows.is_empty() {
-        return String::new();
-    }
-    let mut out = String::from(
-        "\n## Studies against each other (paired by replicate)\n\n| env | protocol | method | study | baseline | replicates | study mean | baseline mean | above on | P(study > baseline) [95 % CI] |\n|---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    for r in rows {
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} of {} | {:.2} [{:.2}, {:.2}] |\n",
-            r.env,
-            r.protocol.name(),
-            r.method,
-            r.study,
-            r.baseline,
-            r.replicates,
-            num(Some(r.study_mean)),
-            num(Some(r.baseline_mean)),
-            r.above,
-            r.replicates,
-            r.probability,
-            r.ci.0,
-            r.ci.1
-        ));
-    }
-    out
 }
 
 /// `aggregate.csv`: one row per (env, study, method, protocol).
@@ -253,8 +146,12 @@ pub fn aggregate_frame(rows: &[AggregateRow]) -> Result<DataFrame> {
         Column::new("iqm_ci_low".into(), x(&|r| r.iqm_ci.0)),
         Column::new("iqm_ci_high".into(), x(&|r| r.iqm_ci.1)),
         Column::new("median".into(), x(&|r| r.median)),
-        Column::new("above_demos_avg".into(), x(&|r| r.above_demos_avg)),
-        Column::new("above_demos_best".into(), x(&|r| r.above_demos_best)),
+        Column::new("above_demos_avg".into(), x(&|r| r.above_demos_avg.fraction())),
+        Column::new("above_demos_avg_sign_p".into(), x(&|r| r.above_demos_avg.sign_p())),
+        Column::new("above_demos_avg_rate_low".into(), x(&|r| r.above_demos_avg.lower())),
+        Column::new("above_demos_best".into(), x(&|r| r.above_demos_best.fraction())),
+        Column::new("above_demos_best_sign_p".into(), x(&|r| r.above_demos_best.sign_p())),
+        Column::new("above_demos_best_rate_low".into(), x(&|r| r.above_demos_best.lower())),
     ])
     .map_err(pe)
 }
@@ -262,19 +159,15 @@ pub fn aggregate_frame(rows: &[AggregateRow]) -> Result<DataFrame> {
 /// `improvement.csv`: one row per (env, study, protocol, method, baseline).
 pub fn improvement_frame(rows: &[ImprovementRow]) -> Result<DataFrame> {
     let s = |f: &dyn Fn(&ImprovementRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&ImprovementRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    DataFrame::new_infer_height(vec![
+    let mut columns = vec![
         Column::new("env".into(), s(&|r| r.env.clone())),
         Column::new("study".into(), s(&|r| r.study.clone())),
         Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
         Column::new("method".into(), s(&|r| r.method.clone())),
         Column::new("baseline".into(), s(&|r| r.baseline.clone())),
-        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
-        Column::new("probability".into(), x(&|r| r.probability)),
-        Column::new("ci_low".into(), x(&|r| r.ci.0)),
-        Column::new("ci_high".into(), x(&|r| r.ci.1)),
-    ])
-    .map_err(pe)
+    ];
+    columns.extend(super::improvement::improvement_columns(&rows.iter().map(|r| r.improvement).collect::<Vec<_>>()));
+    DataFrame::new_infer_height(columns).map_err(pe)
 }
 
 /// The studies' section of `report.md`: per environment and protocol, every method's
@@ -291,7 +184,7 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
     groups.dedup();
     for (env, study, protocol) in groups {
         out.push_str(&format!(
-            "\n### {env}, study `{study}`: {}\n\n| method | replicates (runs) | mean [95 % CI] | IQM [95 % CI] | median | above demos avg | above demos best | P(> D-REX) [95 % CI] | P(> BC) [95 % CI] |\n|---|---|---|---|---|---|---|---|---|\n",
+            "\n### {env}, study `{study}`: {}\n\n| method | replicates (runs) | mean [95 % CI] | IQM [95 % CI] | median | above demos avg | above demos best | against D-REX | against BC |\n|---|---|---|---|---|---|---|---|---|\n",
             protocol.title()
         ));
         for r in rows.iter().filter(|r| r.env == env && r.study == study && r.protocol == protocol) {
@@ -299,10 +192,10 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
                 improvement
                     .iter()
                     .find(|i| i.env == env && i.study == study && i.protocol == protocol && i.method == r.method && i.baseline == baseline)
-                    .map_or("-".to_string(), |i| format!("{:.2} [{:.2}, {:.2}]", i.probability, i.ci.0, i.ci.1))
+                    .map_or("-".to_string(), |i| super::improvement::improvement_cell(&i.improvement))
             };
             out.push_str(&format!(
-                "| {} | {} ({}) | {} [{}, {}] | {} [{}, {}] | {} | {:.0} % | {:.0} % | {} | {} |\n",
+                "| {} | {} ({}) | {} [{}, {}] | {} [{}, {}] | {} | {} | {} | {} | {} |\n",
                 r.method,
                 r.replicates,
                 r.runs,
@@ -313,14 +206,14 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
                 num(Some(r.iqm_ci.0)),
                 num(Some(r.iqm_ci.1)),
                 num(Some(r.median)),
-                100.0 * r.above_demos_avg,
-                100.0 * r.above_demos_best,
+                r.above_demos_avg,
+                r.above_demos_best,
                 p(Method::Drex.name()),
                 p(Method::Bc.name()),
             ));
         }
     }
-    out.push('\n');
+    out.push_str(super::improvement::LEGEND);
     out
 }
 
@@ -367,39 +260,17 @@ mod tests {
         assert_eq!(d.iqm, 5.5, "the middle two of 1, 4, 7, 10");
         assert!(d.mean_ci.0 < 5.5 && d.mean_ci.1 > 5.5 && d.mean_ci.0 >= 1.0 && d.mean_ci.1 <= 10.0, "{:?}", d.mean_ci);
         // Above the demonstrations' average 4: 10 and 7; above their best 6: the same two.
-        assert_eq!((d.above_demos_avg, d.above_demos_best), (0.5, 0.5));
+        assert_eq!((d.above_demos_avg, d.above_demos_best), (WinCount { k: 2, n: 4 }, WinCount { k: 2, n: 4 }));
         // D-REX against BC's 1, 1, 5, 1: 1 vs {1,1,5,1} = 1.5, 10 and 7 win all 4, 4 wins 3.
-        let p = imp.iter().find(|i| i.method == "drex" && i.baseline == "bc").unwrap();
-        assert_eq!((p.replicates, p.probability), (4, (1.5 + 4.0 + 3.0 + 4.0) / 16.0));
-        assert!(p.ci.0 <= p.probability && p.probability <= p.ci.1);
+        let p = imp.iter().find(|i| i.method == "drex" && i.baseline == "bc").unwrap().improvement;
+        assert_eq!((p.pairs, p.unpaired), (4, (1.5 + 4.0 + 3.0 + 4.0) / 16.0));
+        assert!(p.unpaired_ci.0 <= p.unpaired && p.unpaired <= p.unpaired_ci.1);
+        // Paired: 1 ties 1, 10 > 1, 4 < 5, 7 > 1.
+        assert_eq!((p.wins, p.ties), (2, 1));
         assert!(imp.iter().all(|i| i.method != i.baseline));
         let md = markdown(&agg, &imp);
         assert!(md.contains("| drex | 4 (8) | 5.5 [") && md.contains("study `s`"), "{md}");
         let csv = aggregate_frame(&agg).unwrap();
         assert_eq!(csv.height(), 2);
-    }
-
-    /// Two studies compared replicate by replicate, on the replicates both ran.
-    #[test]
-    fn compares_two_studies_on_their_shared_replicates() {
-        let mut rows = Vec::new();
-        for (r, new, old) in [(1, 5.0, 1.0), (2, 6.0, 7.0), (3, 8.0, 2.0)] {
-            rows.push(row("new", r, "drex", &[new]));
-            rows.push(row("old", r, "drex", &[old]));
-        }
-        rows.push(row("old", 4, "drex", &[100.0]));
-        let (agg, _) = aggregate(&rows, &BTreeMap::new());
-        let c = compare(&agg, "new", "old");
-        assert_eq!(c.len(), 1);
-        let c = &c[0];
-        assert_eq!((c.replicates, c.above), (3, 2), "replicate 4 is the old study's alone");
-        assert_eq!((c.study_mean, c.baseline_mean), (19.0 / 3.0, 10.0 / 3.0));
-        // 5 beats 1 and 2; 6 beats 1 and 2; 8 beats all three.
-        assert_eq!(c.probability, 7.0 / 9.0);
-        assert!(c.ci.0 <= c.probability && c.probability <= c.ci.1);
-        assert!(compare(&agg, "new", "missing").is_empty());
-        let md = comparison_markdown(&[c.clone()]);
-        assert!(md.contains("| Hopper-v5 | final | drex | new | old | 3 | 6.3 | 3.3 | 2 of 3 | 0.78 ["), "{md}");
-        assert_eq!(comparison_frame(&[c.clone()]).unwrap().height(), 1);
     }
 }

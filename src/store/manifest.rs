@@ -40,6 +40,21 @@ pub struct Manifest {
     /// recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub kernel: Option<String>,
+    /// An evaluation's standing against a locked test set, for the report; not part of the
+    /// key. Absent outside test sets.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_set: Option<TestSetMark>,
+}
+
+/// How an evaluation relates to a locked test set (a pipeline file with `role: test`).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TestSetMark {
+    /// Evaluated by the test set's own file, on seeds no other configuration had used.
+    Test { study: String },
+    /// Evaluated with `--reuse-test-set` where a test set (named) or another configuration
+    /// had already looked: the result is exploratory.
+    Reuse { study: String },
 }
 
 /// The key of a stage instance.

@@ -41,7 +41,7 @@ mod manifest;
 pub use claims::NodeDef;
 pub use location::Location;
 pub use locks::{KeyLock, UseLock};
-pub use manifest::{MANIFEST, Manifest, OutputFile, hash_outputs, key, now_unix, sha256_file};
+pub use manifest::{MANIFEST, Manifest, OutputFile, TestSetMark, hash_outputs, key, now_unix, sha256_file};
 #[derive(Debug, Clone)]
 pub struct Store {
     /// The store's directory; for an S3 store, the local cache it stages and reads through.
@@ -438,6 +438,7 @@ mod tests {
             wall_s: 0.0,
             idrex_version: "test".into(),
             kernel: None,
+            test_set: None,
         }
     }
 

@@ -169,8 +169,11 @@ impl Default for EvalConfig {
     }
 }
 
-/// How PPO's reward is composed from the learned ensemble ([`Composition`]).
-#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+/// How PPO's reward is composed from the learned ensemble ([`Composition`]). The defaults of
+/// `level` and `ceiling` are the recommended reward (analysis/results/reward-level/, and
+/// analysis/results/walker2d-reward/ for Walker2d), not the original code's:
+/// `pipelines/*-original.yaml` spell the original's out.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RewardSettings {
     /// Control-cost coefficient subtracted from the learned reward (default per environment:
@@ -180,15 +183,55 @@ pub struct RewardSettings {
     pub combine: Combine,
     /// raw (the original code; the default), or clipped.
     pub ctrl_action: CtrlAction,
-    /// Where each member is centred and scaled for RL: running (PPO's own experience; the
-    /// original code and the default) or ranked-floor (fixed from D-REX's ranked set).
+    /// Where each member is centred and scaled for RL: ranked-floor (fixed from D-REX's ranked
+    /// set; the default) or running (PPO's own experience; the original code).
     pub level: RewardLevel,
     /// k in mean - k x the members' spread, a brake on exploitation (0: none, the default).
     pub disagreement: f64,
-    /// A quantile q in (0, 1]: each member's raw reward per step is capped at the q-quantile
-    /// of its values over D-REX's ranked set, a brake on exploitation (absent: no cap, the
-    /// default and the original code).
-    pub ceiling: Option<f64>,
+    /// A brake on exploitation: each member's raw reward per step is capped at the q-quantile
+    /// of its values over D-REX's ranked set, for q in (0, 1] (default 0.75), or `none` (no
+    /// cap: the original code).
+    pub ceiling: Ceiling,
+}
+
+impl Default for RewardSettings {
+    fn default() -> Self {
+        RewardSettings {
+            ctrl_coeff: None,
+            combine: Combine::default(),
+            ctrl_action: CtrlAction::default(),
+            level: RewardLevel::RankedFloor,
+            disagreement: 0.0,
+            ceiling: Ceiling::Quantile(0.75),
+        }
+    }
+}
+
+/// `reward.ceiling`: a quantile, or the keyword `none`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(untagged)]
+pub enum Ceiling {
+    /// No cap (the original code).
+    Off(NoCeiling),
+    /// The quantile q in (0, 1] at which each member is capped.
+    Quantile(f64),
+}
+
+/// The keyword that turns the ceiling off.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoCeiling {
+    None,
+}
+
+impl Ceiling {
+    /// The quantile, where there is a cap.
+    pub fn quantile(self) -> Option<f64> {
+        match self {
+            Ceiling::Off(_) => None,
+            Ceiling::Quantile(q) => Some(q),
+        }
+    }
 }
 
 /// Per-method overrides of the shared stage parameters (any subset of their fields).
@@ -226,6 +269,12 @@ pub struct PipelineFile {
     /// split one study give disjoint ranges.
     #[serde(default)]
     pub first_replicate: Option<f64>,
+    /// `test` declares the file a locked test set: once it has evaluated on its seeds, idrex
+    /// refuses to evaluate any other configuration there (and this file on seeds another
+    /// configuration used) without `--reuse-test-set`, and the report marks results
+    /// obtained that way. Not part of any key.
+    #[serde(default)]
+    pub role: Role,
     /// The methods to run and report.
     #[serde(default = "default_methods")]
     pub methods: Vec<Method>,
@@ -260,6 +309,17 @@ pub struct PipelineFile {
     /// sees one), `cpu` or `cuda`. A GPU stage has `device: cuda` in its key.
     #[serde(default)]
     pub device: DeviceChoice,
+}
+
+/// What a pipeline file is for ([`PipelineFile::role`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Role {
+    /// Tuning or exploration: its seeds may be reused.
+    #[default]
+    Study,
+    /// A locked test set: its seeds are looked at once.
+    Test,
 }
 
 /// A Slurm job's resources; unset fields fall back to `slurm.default`, then to the

@@ -329,7 +329,7 @@ mod tests {
 
     /// The reward's level and the two brakes touch PPO only: exactly the PPO stages
     /// and what depends on them change (the stored rewards are reused); their defaults (the
-    /// original's) change nothing.
+    /// recommended reward) change nothing when spelled out.
     #[test]
     fn reward_options_change_exactly_the_rl_stages_and_what_follows() {
         let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
@@ -338,22 +338,27 @@ mod tests {
         expected.sort();
         expected.dedup();
         assert!(!expected.is_empty());
-        for extra in ["reward:\n  level: ranked-floor\n", "reward:\n  disagreement: 0.5\n", "reward:\n  ceiling: 0.99\n"] {
+        for extra in
+            ["reward:\n  level: running\n", "reward:\n  disagreement: 0.5\n", "reward:\n  ceiling: 0.99\n", "reward:\n  ceiling: none\n"]
+        {
             let mut got = changed(extra);
             got.sort();
             assert_eq!(got, expected, "{extra}");
             // D-REX's reward and multi-BC's judge (trained on D-REX's sets) are reused.
             assert!(!got.iter().any(|n| n == "drex/trex" || n == "bc" || n.ends_with("/judge")), "{got:?}");
         }
-        assert!(changed("reward:\n  level: running\n  disagreement: 0\n").is_empty());
-        // The ranked floor is measured on D-REX's set.
-        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}reward:\n  level: ranked-floor\n")).unwrap();
-        let g = expand(&p).unwrap();
-        let ppo = g.get("drex/ppo/0").unwrap();
-        assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
-        let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}reward:\n  ceiling: 0.99\n")).unwrap();
-        let ppo = expand(&p).unwrap().get("drex/ppo/0").unwrap().clone();
-        assert!(ppo.inputs.contains(&("floor".to_string(), "drex/noise".to_string())), "{:?}", ppo.inputs);
+        assert!(changed("reward:\n  level: ranked-floor\n  ceiling: 0.75\n  disagreement: 0\n").is_empty());
+        // The ranked floor and the ceiling are measured on D-REX's set; the original's reward
+        // (running, no cap) reads no set.
+        let ppo_inputs = |extra: &str| {
+            let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}{extra}")).unwrap();
+            expand(&p).unwrap().get("drex/ppo/0").unwrap().inputs.clone()
+        };
+        let floor = ("floor".to_string(), "drex/noise".to_string());
+        for extra in ["", "reward:\n  ceiling: none\n", "reward:\n  level: running\n"] {
+            assert!(ppo_inputs(extra).contains(&floor), "{extra}");
+        }
+        assert!(!ppo_inputs("reward:\n  level: running\n  ceiling: none\n").contains(&floor));
     }
 
     /// Training the rewards in bf16 changes every T-REX stage and what follows it (BC and the
@@ -434,7 +439,8 @@ mod tests {
         }
         assert_eq!(g.subgraph("Walker2d-v5/").nodes, walker.nodes);
         let ppo = g.get("Walker2d-v5/drex/ppo/0").unwrap();
-        assert_eq!(ppo.inputs, vec![("reward".to_string(), "Walker2d-v5/drex/trex".to_string())]);
+        let reward = |role: &str, node: &str| (role.to_string(), format!("Walker2d-v5/drex/{node}"));
+        assert_eq!(ppo.inputs, vec![reward("reward", "trex"), reward("floor", "noise")]);
         // Each environment keeps its own defaults (the control-cost weight differs).
         assert_ne!(study.for_env(crate::env::EnvId::HalfCheetah).composition, study.composition);
 

@@ -1,0 +1,63 @@
+//! What the tables do not show, per environment and pipeline: each learned reward's
+//! validation accuracy and what multi-BC's clone filter kept.
+use std::collections::BTreeMap;
+
+use super::Artifacts;
+use crate::error::Result;
+use crate::pipeline::stage::{Metrics, Params, Typed};
+
+/// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
+/// accuracy, and what multi-BC's clone filter kept (when it keeps none, multi-BC's reward is
+/// trained on D-REX's rankings alone, and its results equal D-REX's).
+pub fn notes(store: &Artifacts) -> Result<String> {
+    let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for m in store.iter() {
+        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
+        let Some(reward) = m.inputs.get("reward") else { continue };
+        if !seen.insert((p.pipeline.clone(), reward.clone())) {
+            continue;
+        }
+        let Some(rm) = store.get(reward) else { continue };
+        let group = lines.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
+        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(rm) {
+            let label = if p.iteration > 2 { format!("{} (k={})", p.method.label(), p.iteration) } else { p.method.label().to_string() };
+            group.insert(format!(
+                "{label}: the learned reward ({}) ranks {:.1} % of held-out training pairs correctly; on its training set Pearson {:.2}",
+                rm.node,
+                t.val_accuracy * 100.0,
+                t.train_set.pearson
+            ));
+        }
+        for (role, key) in &rm.inputs {
+            if let (true, Some(sm)) = (role.starts_with("set"), store.get(key))
+                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
+            {
+                let kept = x.kept();
+                let fidelity: Vec<String> = x.clones.iter().map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
+                let mut line = format!(
+                    "{}: the clone filter kept {kept} of {} clones; their fidelity (true return, random 0, source 1) {}",
+                    sm.node,
+                    x.clones.len(),
+                    fidelity.join(", ")
+                );
+                if kept == 0 {
+                    line.push_str("; with none kept, multi-BC's reward saw D-REX's rankings only, so its figures repeat D-REX's");
+                }
+                group.insert(line);
+            }
+        }
+    }
+    let mut out = String::new();
+    if !lines.is_empty() {
+        out.push_str("\n## Notes\n");
+        for ((env, pipeline), group) in lines {
+            out.push_str(&format!("\n### {env} {pipeline}\n\n"));
+            for l in group {
+                out.push_str(&format!("- {l}\n"));
+            }
+        }
+    }
+    Ok(out)
+}
+
