@@ -3,6 +3,7 @@ pub mod clones;
 pub mod env;
 pub mod learners;
 pub mod ppo;
+pub mod scripts;
 pub mod trex;
 
 pub use env::{EnvBench, EnvBenchArgs, default_python, env_bench, measure_env};

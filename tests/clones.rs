@@ -79,4 +79,7 @@ fn each_clone_builds_its_own_sources() {
     assert!(cargo_help(&a).contains("CLONE-A-MARK"), "and back, with plain cargo");
     assert!(!dev_help(&b).contains("CLONE-A-MARK"), "and ./dev in clone b");
     std::fs::remove_dir_all(&base).unwrap();
+    // Leave the shared build as this clone builds it: the suite's later tests, and a user's
+    // `target/release/idrex`, run this clone's code (issue 43).
+    assert!(!dev_help(repo).contains("CLONE-A-MARK"));
 }

@@ -1,7 +1,6 @@
 //! `idrex bench env`: environment throughput, each figure next to a baseline measured in the
 //! same run: the raw mj_step rate of the same model over the same transitions, Gymnasium's
 //! Python environment (run by the same command), and one thread for the vectorised env.
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -98,15 +97,7 @@ fn vec_pass(id: EnvId, n: usize, threads: usize, steps: usize) -> anyhow::Result
 }
 
 fn gymnasium_pass(python: &str, id: EnvId, steps: usize) -> anyhow::Result<f64> {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("analysis/gym_bench.py");
-    let out = std::process::Command::new(python)
-        .arg(&script)
-        .args(["--env", id.name(), "--steps", &steps.to_string()])
-        .output()
-        .with_context(|| format!("cannot run {python} {}", script.display()))?;
-    if !out.status.success() {
-        anyhow::bail!("{} failed: {}", script.display(), String::from_utf8_lossy(&out.stderr));
-    }
+    let out = super::scripts::Script::GymBench.run(python, &["--env", id.name(), "--steps", &steps.to_string()].map(String::from))?;
     let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
     v["steps_per_s"].as_f64().context("gym_bench.py printed no steps_per_s")
 }

@@ -192,16 +192,18 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
     let torch: Option<serde_json::Value> = match &python {
         None => None,
         Some(py) => {
-            let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("analysis/bench_learners.py");
-            let out = std::process::Command::new(py)
-                .arg(&script)
-                .args(["--threads", &threads.to_string()])
-                .args(["--trex-iterations", &args.trex_iterations.to_string()])
-                .args(["--bc-iterations", &args.bc_iterations.to_string()])
-                .args(["--device", device.name()])
-                .output()
-                .with_context(|| format!("cannot run {py} {}", script.display()))?;
-            anyhow::ensure!(out.status.success(), "{}: {}", script.display(), String::from_utf8_lossy(&out.stderr));
+            let script_args = [
+                "--threads",
+                &threads.to_string(),
+                "--trex-iterations",
+                &args.trex_iterations.to_string(),
+                "--bc-iterations",
+                &args.bc_iterations.to_string(),
+                "--device",
+                device.name(),
+            ]
+            .map(String::from);
+            let out = super::scripts::Script::BenchLearners.run(py, &script_args)?;
             Some(serde_json::from_slice(&out.stdout).context("the PyTorch baseline printed no JSON")?)
         }
     };

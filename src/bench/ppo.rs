@@ -28,13 +28,8 @@ pub struct PpoBenchArgs {
 /// Stable-Baselines3's PPO at CleanRL's settings on one thread (its steps per second).
 fn sb3_rate(python: &str, env: EnvId, steps: usize) -> anyhow::Result<f64> {
     use anyhow::Context;
-    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("analysis/bench_ppo.py");
-    let out = std::process::Command::new(python)
-        .arg(&script)
-        .args(["--sb3-only", "--env", env.name(), "--steps", &steps.to_string()])
-        .output()
-        .with_context(|| format!("cannot run {python} {}", script.display()))?;
-    anyhow::ensure!(out.status.success(), "{}: {}", script.display(), String::from_utf8_lossy(&out.stderr));
+    let args = ["--sb3-only", "--env", env.name(), "--steps", &steps.to_string()].map(String::from);
+    let out = super::scripts::Script::BenchPpo.run(python, &args)?;
     let line = String::from_utf8_lossy(&out.stdout).lines().last().unwrap_or_default().to_string();
     let v: serde_json::Value = serde_json::from_str(&line).context("the Stable-Baselines3 baseline printed no JSON")?;
     v["steps_per_s"].as_f64().context("the Stable-Baselines3 baseline printed no steps_per_s")

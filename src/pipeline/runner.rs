@@ -257,8 +257,19 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
             }
             let (name, s) = rx.recv().expect("a worker reports before it exits");
             running.remove(&name);
+            if let (Status::Computed { wall_s }, Some(n)) = (&s, graph.get(&name)) {
+                taken += wall_s;
+                estimated += estimates.seconds(n);
+            }
+            since.remove(&name);
+            overall.inc(1);
+            status.insert(name.clone(), s.clone());
+            // Calibrated once a minute of estimated work has run: short stages say little.
+            let scale = if estimated > 60.0 { (taken / estimated).clamp(0.25, 4.0) } else { 1.0 };
+            let eta = format!("about {} left", minutes(left(&status, &since, scale)));
+            overall.set_message(eta.clone());
             // Finished stages leave one line above the bars (or in the log, without a
-            // terminal): what happened and how long it took.
+            // terminal, with the bar's figures): what happened and how long it took.
             let line = match &s {
                 Status::Failed { error, .. } => Some(format!("  failed    {name}: {error}")),
                 Status::Computed { wall_s } => Some(format!("  computed  {name} ({wall_s:.1} s)")),
@@ -266,17 +277,18 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                 Status::Skipped { .. } => None,
             };
             if let Some(line) = line.filter(|_| opts.progress) {
-                if multi.is_hidden() { eprintln!("{line}") } else { multi.println(line).ok().unwrap_or(()) }
+                if multi.is_hidden() {
+                    let done = format!(
+                        "{}/{} stages, {} elapsed, {eta}",
+                        overall.position(),
+                        graph.nodes.len(),
+                        minutes(overall.elapsed().as_secs_f64())
+                    );
+                    eprintln!("{line}  [{done}]")
+                } else {
+                    multi.println(line).ok().unwrap_or(())
+                }
             }
-            if let (Status::Computed { wall_s }, Some(n)) = (&s, graph.get(&name)) {
-                taken += wall_s;
-                estimated += estimates.seconds(n);
-            }
-            since.remove(&name);
-            overall.inc(1);
-            status.insert(name, s);
-            let scale = if estimated > 0.0 { (taken / estimated).clamp(0.25, 4.0) } else { 1.0 };
-            overall.set_message(format!("about {} left", minutes(left(&status, &since, scale))));
         }
     });
     overall.finish_and_clear();

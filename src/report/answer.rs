@@ -164,7 +164,7 @@ pub fn markdown(
         out.push_str(&format!(
             "### {env}, {study} ({n} replicates){}\n\nFinal policy, ground-truth return: the mean over replicates of each replicate's mean \
              over its runs, with a 95 % interval that resamples replicates and then runs. BC {}. \"k of n\" counts replicates; p is the \
-             one-sided sign test, and the bound the 95 % Clopper-Pearson lower bound on the rate.\n\n\
+             one-sided sign test, and \"rate ≥\" the 95 % Clopper-Pearson lower bound on the rate.\n\n\
              | method | return [95 % CI] | above BC | above the demonstrations' average |\n|---|---|---|---|\n",
             caveat(env, study),
             num(Some(bc.mean))

@@ -27,8 +27,8 @@ use crate::stats::spearman;
 use crate::store::{Manifest, Store};
 
 pub use crate::pipeline::stage::eval::{Selection, select};
-use protocols::RESAMPLES;
 pub use notes::notes;
+use protocols::RESAMPLES;
 pub use protocols::{Protocol, ProtocolRow, protocols_frame};
 use protocols::{RunEval, protocol_rows, protocols_markdown};
 

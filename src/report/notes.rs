@@ -60,4 +60,3 @@ pub fn notes(store: &Artifacts) -> Result<String> {
     }
     Ok(out)
 }
-
