@@ -42,7 +42,7 @@ pub fn notes(store: &Artifacts) -> Result<String> {
                     fidelity.join(", ")
                 );
                 if kept == 0 {
-                    line.push_str("; with none kept, multi-BC's reward saw D-REX's rankings only, so its figures repeat D-REX's");
+                    line.push_str("; with none kept, this iteration's reward saw no rankings the previous one's had not, so its figures repeat the previous iteration's (D-REX's, at the first)");
                 }
                 group.insert(line);
             }
