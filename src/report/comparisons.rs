@@ -103,26 +103,8 @@ mod tests {
     use std::collections::BTreeMap;
 
     use super::*;
-    use crate::report::ProtocolRow;
     use crate::report::studies::aggregate;
-    use crate::stats::ReturnStats;
-
-    fn row(study: &str, replicate: usize, method: &str, run_means: &[f64]) -> ProtocolRow {
-        ProtocolRow {
-            env: "Hopper-v5".into(),
-            pipeline: if replicate == 0 { study.into() } else { format!("{study}/r{replicate}") },
-            study: study.into(),
-            replicate,
-            run_means: run_means.to_vec(),
-            method: method.into(),
-            protocol: Protocol::Final,
-            step: None,
-            stats: ReturnStats::of(run_means),
-            runs: run_means.len(),
-            ci: (0.0, 0.0),
-            gap_to_best: None,
-        }
-    }
+    use crate::report::studies::tests::row;
 
     /// Two studies compared replicate by replicate, on the replicates both ran.
     #[test]

@@ -218,11 +218,12 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::stats::ReturnStats;
 
-    fn row(study: &str, replicate: usize, method: &str, run_means: &[f64]) -> ProtocolRow {
+    /// One (study, replicate, method)'s final-policy row from its runs' means.
+    pub(in crate::report) fn row(study: &str, replicate: usize, method: &str, run_means: &[f64]) -> ProtocolRow {
         ProtocolRow {
             env: "Hopper-v5".into(),
             pipeline: if replicate == 0 { study.into() } else { format!("{study}/r{replicate}") },
