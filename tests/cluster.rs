@@ -12,6 +12,9 @@ use std::time::{Duration, Instant};
 
 use idrex::store::{Location, Store};
 
+#[path = "util.rs"]
+mod util;
+
 const KEY: &str = "idrex-test-key";
 const SECRET: &str = "idrex-test-secret-not-for-logs";
 const BUCKET: &str = "idrex";
@@ -122,9 +125,12 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     if !started.status.success() {
         let why = text(&started);
         assert!(std::env::var_os("IDREX_REQUIRE_SERVICES").is_none(), "the services did not start (IDREX_REQUIRE_SERVICES is set): {why}");
-        println!(
-            "test {NAME} ... SKIPPED: the Slurm and S3 services did not start (`scripts/services.sh install` installs them): {}",
-            why.trim().lines().last().unwrap_or("")
+        util::skip(
+            NAME,
+            &format!(
+                "the Slurm and S3 services did not start (`scripts/services.sh install` installs them): {}",
+                why.trim().lines().last().unwrap_or("")
+            ),
         );
         return false;
     }

@@ -1,9 +1,10 @@
 //! The README and the pages beside it stay true: every relative link resolves, every `idrex`
-//! command they show parses (its subcommand exists: `--help` succeeds), and every field of
-//! the pipeline schema is on the schema page.
+//! command they show parses whole (subcommands, flags and the types of their values, with
+//! placeholders replaced by samples), and every field of the pipeline schema is on the
+//! schema page.
 use std::path::{Path, PathBuf};
 
-use crate::util::{idrex, repo, stderr};
+use crate::util::repo;
 
 fn pages() -> Vec<PathBuf> {
     let mut out = vec![repo("README.md"), repo("analysis/results/README.md")];
@@ -45,45 +46,101 @@ fn every_link_resolves() {
     assert!(checked >= 12, "{checked} links");
 }
 
-/// The command words of a shown command line: `idrex pipeline run FILE ...` ->
-/// [pipeline, run] (up to the first argument that is not a subcommand name).
-fn command_words(line: &str) -> Option<Vec<String>> {
+/// The concrete command lines a shown synopsis stands for: after `idrex ` or `./dev `, with
+/// the comment cut, every optional `[...]` group included, `...` dropped, each placeholder
+/// (FILE, N, ...) replaced by a sample of its type, and one line per choice of `a|b|c`.
+/// None for lines that are not idrex commands (`./dev main`, `./dev test`).
+fn concrete_commands(line: &str) -> Option<Result<Vec<Vec<String>>, String>> {
     let line = line.trim();
     let rest = line.strip_prefix("idrex ").or_else(|| line.strip_prefix("./dev "))?;
-    let words: Vec<String> = rest
-        .split_whitespace()
-        .take_while(|w| w.chars().all(|c| c.is_ascii_lowercase() || c == '-') && !w.starts_with('-'))
-        .take(2)
-        .map(str::to_string)
-        .collect();
-    (!words.is_empty() && words[0] != "main" && words[0] != "test").then_some(words)
+    let rest = rest.split("  #").next().unwrap().split(" # ").next().unwrap();
+    let words: Vec<String> = rest.replace(['[', ']'], " ").split_whitespace().filter(|w| *w != "..." && *w != "|").map(|w| w.trim_end_matches("...").to_string()).collect();
+    if matches!(words.first().map(String::as_str), Some("main" | "test") | None) {
+        return None;
+    }
+    let sample = |w: &str| -> Result<String, String> {
+        // An upper-case placeholder, perhaps with an extension (FILE.mcap) or in angle
+        // brackets (<key>).
+        let stem = w.trim_start_matches('<').trim_end_matches('>');
+        let (name, ext) = stem.split_once('.').unwrap_or((stem, ""));
+        let placeholder = w.starts_with('<') || (name.len() > 0 && name.chars().all(|c| c.is_ascii_uppercase()));
+        if !placeholder {
+            return Ok(w.to_string());
+        }
+        let value = match name {
+            "N" | "R" | "S" | "T" => "1",
+            "FILE" if ext.is_empty() => "pipelines/smoke.yaml",
+            "FILE" | "ACTIONS" | "STATE" | "OUT" => "out",
+            "STORE" => "artifacts",
+            "ENV" | "E" | "ID" => "Hopper-v5",
+            "D" => "cpu",
+            "DIR" => "dir",
+            "P" => "python3",
+            "ARG" => "--x",
+            "NODE" => "bc",
+            "LEVER" => "original",
+            "key" | "KEY" => "0000000000000000000000000000000000000000000000000000000000000000",
+            "STUDY:BASELINE" | "STUDY" => "a:b",
+            _ => return Err(format!("no sample value for the placeholder {w}: add one to concrete_commands")),
+        };
+        Ok(if ext.is_empty() || w.starts_with('<') { value.to_string() } else { format!("{value}.{ext}") })
+    };
+    let mut lines: Vec<Vec<String>> = vec![vec![]];
+    for w in &words {
+        let choices: Vec<&str> = if w.starts_with('-') { vec![w.as_str()] } else { w.split('|').collect() };
+        let mut next = Vec::new();
+        for l in &lines {
+            for c in &choices {
+                let v = match sample(c) {
+                    Ok(v) => v,
+                    Err(e) => return Some(Err(e)),
+                };
+                let mut l = l.clone();
+                // `--sbatch-arg ARG`: a value that starts with a dash goes with `=`.
+                match (l.last_mut(), v.starts_with('-') && c.chars().all(|ch| ch.is_ascii_uppercase())) {
+                    (Some(flag), true) => *flag = format!("{flag}={v}"),
+                    _ => l.push(v),
+                }
+                next.push(l);
+            }
+        }
+        lines = next;
+    }
+    Some(Ok(lines))
+}
+
+/// Whether `idrex <args>` parses: the subcommands, every flag and every value's type.
+fn parses(args: &[String]) -> Result<(), String> {
+    use clap::Parser;
+    idrex::cli::Cli::try_parse_from(std::iter::once("idrex".to_string()).chain(args.iter().cloned())).map(|_| ()).map_err(|e| e.to_string())
 }
 
 #[test]
-fn every_shown_command_parses() {
-    let mut seen = std::collections::BTreeSet::new();
+fn every_shown_command_parses_whole() {
+    let mut checked = 0;
     for page in pages() {
         for line in std::fs::read_to_string(&page).unwrap().lines().filter(|l| l.starts_with("    ")) {
-            let Some(mut words) = command_words(line) else { continue };
-            // `idrex logs list|show|export` and the like: the first alternative.
-            if let Some(w) = words.get_mut(1) {
-                *w = w.split('|').next().unwrap().to_string();
-            }
-            if seen.insert(words.clone()) {
-                let mut args: Vec<&str> = words.iter().map(String::as_str).collect();
-                args.push("--help");
-                let out = idrex(&args);
-                if !out.status.success() && words.len() == 2 {
-                    // The second word was an argument, not a subcommand.
-                    let alone = idrex(&[words[0].as_str(), "--help"]);
-                    assert!(alone.status.success(), "{}: `idrex {}` does not parse: {}", page.display(), words[0], stderr(&alone));
-                    continue;
-                }
-                assert!(out.status.success(), "{}: `idrex {}` does not parse: {}", page.display(), words.join(" "), stderr(&out));
-            }
+            let Some(variants) = concrete_commands(line) else { continue };
+            let variants = variants.unwrap_or_else(|e| panic!("{}: {line}: {e}", page.display()));
+            // `logs list|show|export ... [--episode N]`: some choice parses with every option.
+            let errors: Vec<String> = variants.iter().filter_map(|v| parses(v).err()).collect();
+            assert!(errors.len() < variants.len(), "{}: `{}` does not parse:\n{}", page.display(), line.trim(), errors[0]);
+            checked += 1;
         }
     }
-    assert!(seen.len() >= 15, "{seen:?}");
+    assert!(checked >= 25, "{checked} command lines");
+}
+
+#[test]
+fn a_misspelled_flag_or_value_in_a_shown_command_fails() {
+    let one = |line: &str| concrete_commands(line).unwrap().unwrap().into_iter().map(|v| parses(&v)).collect::<Vec<_>>();
+    assert!(one("    idrex pipeline run FILE [--jobs N] [--force NODE]...").iter().all(Result::is_ok));
+    assert!(one("    idrex pipeline run FILE [--jbos N]").iter().all(Result::is_err));
+    assert!(one("    idrex pipeline run FILE --jobs many").iter().all(Result::is_err));
+    assert!(one("    idrex pipline run FILE").iter().all(Result::is_err));
+    assert!(one("    idrex report --format csv|pdf").iter().any(Result::is_err));
+    assert!(concrete_commands("    idrex eval --policy WHATEVER").unwrap().is_err());
+    assert!(concrete_commands("    ./dev test    # every test").is_none());
 }
 
 /// The schema page is the schema generated from the config structs' rustdoc, so the two
@@ -116,4 +173,23 @@ fn the_schema_page_is_generated_from_the_config_structs() {
         }
     }
     assert!(missing.is_empty(), "fields the schema page does not name: {missing:?}");
+}
+
+/// The stage table at the top of `pipeline/stage/mod.rs` names every production stage kind
+/// with its current version.
+#[test]
+fn the_stage_table_gives_each_kind_its_version() {
+    use idrex::pipeline::stage::StageKind;
+    let text = std::fs::read_to_string(repo("src/pipeline/stage/mod.rs")).unwrap();
+    let table: std::collections::BTreeMap<String, u32> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("//! | "))
+        .filter_map(|row| {
+            let cells: Vec<&str> = row.split(" | ").collect();
+            Some((cells.first()?.to_string(), cells.get(1)?.parse().ok()?))
+        })
+        .collect();
+    let code: std::collections::BTreeMap<String, u32> =
+        StageKind::ALL.iter().filter(|k| **k != StageKind::TestValue).map(|k| (k.name().to_string(), k.version())).collect();
+    assert_eq!(table, code, "src/pipeline/stage/mod.rs's table against StageKind::version");
 }

@@ -1,7 +1,9 @@
-//! The code's layout stays readable: no source file holds more than 450 lines before its
-//! test module, and no two modules import each other, directly or through others (a module
-//! and its own submodules count as one room). Imports are read from `use` items and
-//! `crate::` paths in the code, not from comments.
+//! The code's layout stays readable: no source file holds more than 450 production lines
+//! (every line outside a `#[cfg(test)]` item, wherever that item sits), no two modules import
+//! each other, directly or through others (a module and its own submodules count as one
+//! room), and no two folders do either. Imports are read from `use` items and `crate::`
+//! paths in the code, not from comments. Each check is also run on planted violations, so a
+//! broken checker fails here rather than passing everything.
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
@@ -35,11 +37,80 @@ fn modules() -> BTreeMap<String, PathBuf> {
         .collect()
 }
 
-/// The code before the test module, without comment lines.
+/// The production code of a file: its lines with every `#[cfg(test)]` item cut out (a
+/// test module, or a test-only method in the middle of an impl).
+fn production(text: &str) -> Vec<&str> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if lines[i].trim() != "#[cfg(test)]" {
+            out.push(lines[i]);
+            i += 1;
+            continue;
+        }
+        // Skip the attribute and the item after it: up to its `;`, or its braces' close.
+        let (mut depth, mut opened) = (0i64, false);
+        i += 1;
+        while i < lines.len() {
+            let line = lines[i];
+            i += 1;
+            for c in code_chars(line) {
+                match c {
+                    '{' => (depth, opened) = (depth + 1, true),
+                    '}' => depth -= 1,
+                    _ => {}
+                }
+            }
+            if (opened && depth <= 0) || (!opened && line.trim_end().ends_with(';')) {
+                break;
+            }
+        }
+    }
+    out
+}
+
+/// A line's characters outside string and char literals and `//` comments (enough to count
+/// braces in this crate: no raw strings hold braces).
+fn code_chars(line: &str) -> Vec<char> {
+    let mut out = Vec::new();
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '/' if chars.peek() == Some(&'/') => break,
+            '"' => {
+                while let Some(d) = chars.next() {
+                    match d {
+                        '\\' => {
+                            chars.next();
+                        }
+                        '"' => break,
+                        _ => {}
+                    }
+                }
+            }
+            // A char literal ('{', '\''), not a lifetime ('a): its close quote is near.
+            '\'' => {
+                let ahead: Vec<char> = chars.clone().take(3).collect();
+                let len = match ahead.as_slice() {
+                    ['\\', ..] => chars.clone().position(|d| d == '\'').map_or(0, |p| if p == 1 { 3 } else { p + 1 }),
+                    [_, '\'', ..] => 2,
+                    _ => 0,
+                };
+                for _ in 0..len {
+                    chars.next();
+                }
+            }
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// The production code, without comment lines.
 fn code(path: &Path) -> String {
     let text = std::fs::read_to_string(path).unwrap();
-    let body = text.split("#[cfg(test)]").next().unwrap();
-    body.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n")
+    production(&text).into_iter().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n")
 }
 
 /// The paths a use tree names: `a::{b, c::{d, e}}` -> a::b, a::c::d, a::c::e.
@@ -145,29 +216,32 @@ fn imports(module: &str, path: &Path, known: &BTreeMap<String, PathBuf>) -> BTre
 }
 
 #[test]
-fn no_source_file_is_over_450_lines_before_its_tests() {
+fn no_source_file_holds_over_450_production_lines() {
     let long: Vec<String> = modules()
         .values()
         .filter_map(|p| {
-            let text = std::fs::read_to_string(p).unwrap();
-            let n = text.split("#[cfg(test)]").next().unwrap().lines().count();
+            let n = production(&std::fs::read_to_string(p).unwrap()).len();
             (n > MAX_LINES).then(|| format!("{} ({n} lines)", p.display()))
         })
         .collect();
-    assert!(long.is_empty(), "over {MAX_LINES} lines before the test module: {long:?}");
+    assert!(long.is_empty(), "over {MAX_LINES} production lines: {long:?}");
 }
 
 #[test]
-fn no_module_imports_one_that_imports_it_back() {
-    let known = modules();
-    let edges: BTreeMap<String, BTreeSet<String>> = known.iter().map(|(m, p)| (m.clone(), imports(m, p, &known))).collect();
-    // A depth-first search that reports the first cycle it closes.
-    fn visit(
-        m: &str,
-        edges: &BTreeMap<String, BTreeSet<String>>,
-        state: &mut BTreeMap<String, bool>,
-        stack: &mut Vec<String>,
-    ) -> Option<Vec<String>> {
+fn production_lines_include_those_after_a_test_only_method() {
+    let text = "struct A;\nimpl A {\n    #[cfg(test)]\n    fn probe(&self) -> char {\n        '{'\n    }\n    fn real(&self) {\n        let s = \"}\";\n    }\n}\n#[cfg(test)]\nmod tests {\n    #[test]\n    fn t() {}\n}\n";
+    let kept = production(text);
+    assert_eq!(kept, ["struct A;", "impl A {", "    fn real(&self) {", "        let s = \"}\";", "    }", "}"]);
+    assert_eq!(production("#[cfg(test)]\nmod tests;\nfn f() {}\n"), ["fn f() {}"]);
+    let braces = |l: &str| code_chars(l).into_iter().filter(|c| "{}".contains(*c)).collect::<String>();
+    assert_eq!(braces("let (a, b) = ('\\'', '{'); f::<'a>(\"}\\\"\", '\\u{7b}') { // }"), "{");
+}
+
+type Edges = BTreeMap<String, BTreeSet<String>>;
+
+/// The first cycle a depth-first search closes, as a path that ends where it starts.
+fn find_cycle(edges: &Edges) -> Option<Vec<String>> {
+    fn visit(m: &str, edges: &Edges, state: &mut BTreeMap<String, bool>, stack: &mut Vec<String>) -> Option<Vec<String>> {
         match state.get(m) {
             Some(true) => return None,
             Some(false) => {
@@ -180,7 +254,7 @@ fn no_module_imports_one_that_imports_it_back() {
         }
         state.insert(m.to_string(), false);
         stack.push(m.to_string());
-        for n in &edges[m] {
+        for n in edges.get(m).into_iter().flatten() {
             if let Some(c) = visit(n, edges, state, stack) {
                 return Some(c);
             }
@@ -190,14 +264,72 @@ fn no_module_imports_one_that_imports_it_back() {
         None
     }
     let mut state = BTreeMap::new();
-    for m in known.keys() {
-        if let Some(cycle) = visit(m, &edges, &mut state, &mut Vec::new()) {
-            panic!("import cycle: {}", cycle.join(" -> "));
+    edges.keys().find_map(|m| visit(m, edges, &mut state, &mut Vec::new()))
+}
+
+/// For each folder (the crate root included), the graph between its rooms: every module
+/// under it collapses to the file or subfolder of that folder it lives in. `cli/x.rs` ->
+/// `bench/y.rs` and `bench/z.rs` -> `cli/w.rs` is no module cycle but a root-level one.
+fn folder_graphs(edges: &Edges) -> BTreeMap<String, Edges> {
+    let under = |m: &str, folder: &str| -> Option<String> {
+        let rest = if folder.is_empty() { m } else { m.strip_prefix(folder)?.strip_prefix("::")? };
+        let room = rest.split("::").next().filter(|r| !r.is_empty())?;
+        Some(if folder.is_empty() { room.to_string() } else { format!("{folder}::{room}") })
+    };
+    // Folders: the root and every module that has modules under it.
+    let mut folders: BTreeSet<String> = BTreeSet::from([String::new()]);
+    for m in edges.keys() {
+        let parts: Vec<&str> = m.split("::").collect();
+        for n in 1..parts.len() {
+            folders.insert(parts[..n].join("::"));
         }
     }
-    // The check sees imports at all: the pipeline's layers are there.
+    folders
+        .into_iter()
+        .map(|f| {
+            let mut g = Edges::new();
+            for (m, targets) in edges {
+                let Some(from) = under(m, &f) else { continue };
+                for t in targets {
+                    if let Some(to) = under(t, &f).filter(|to| *to != from) {
+                        g.entry(from.clone()).or_default().insert(to);
+                    }
+                }
+            }
+            (f, g)
+        })
+        .collect()
+}
+
+#[test]
+fn no_module_or_folder_imports_one_that_imports_it_back() {
+    let known = modules();
+    let edges: Edges = known.iter().map(|(m, p)| (m.clone(), imports(m, p, &known))).collect();
+    if let Some(cycle) = find_cycle(&edges) {
+        panic!("import cycle: {}", cycle.join(" -> "));
+    }
+    let graphs = folder_graphs(&edges);
+    for (folder, g) in &graphs {
+        if let Some(cycle) = find_cycle(g) {
+            panic!("import cycle between the rooms of {}/: {}", if folder.is_empty() { "src" } else { folder }, cycle.join(" -> "));
+        }
+    }
+    // The check sees imports at all: the pipeline's layers are there, and folders too.
     assert!(edges["pipeline::graph"].contains("pipeline::stage"), "{:?}", edges["pipeline::graph"]);
     assert!(edges["pipeline::stage::eval"].contains("pipeline::config"), "{:?}", edges["pipeline::stage::eval"]);
+    assert!(graphs[""]["cli"].contains("pipeline"), "{:?}", graphs[""]);
+}
+
+#[test]
+fn a_folder_cycle_without_a_module_cycle_is_found() {
+    let edge = |a: &str, b: &str| (a.to_string(), BTreeSet::from([b.to_string()]));
+    let edges: Edges = [edge("cli::x", "bench::y"), edge("bench::z", "cli::w"), edge("bench::y", "stats"), edge("cli::w", "stats")]
+        .into_iter()
+        .collect();
+    assert_eq!(find_cycle(&edges), None);
+    let graphs = folder_graphs(&edges);
+    assert_eq!(find_cycle(&graphs[""]), Some(vec!["bench".to_string(), "cli".into(), "bench".into()]));
+    assert_eq!(find_cycle(&graphs["cli"]), None);
 }
 
 #[test]

@@ -477,7 +477,7 @@ fn bytes_are_the_same_on_every_kernel_variant() {
         let (out, store) = run(variant, &[("IDREX_KERNEL", variant)]);
         if !has(variant) {
             assert!(!out.status.success() && stderr(&out).contains("IDREX_KERNEL"), "{}", stderr(&out));
-            eprintln!("kernel variant {variant} skipped: this processor lacks it");
+            crate::util::skip(&format!("pipeline::kernel variant {variant}"), "this processor lacks it");
             continue;
         }
         assert!(out.status.success(), "{}", stderr(&out));
@@ -494,6 +494,12 @@ fn bytes_are_the_same_on_every_kernel_variant() {
         assert_eq!(digests(&store), reference, "{var}={value} changes no byte");
     }
     eprintln!("smoke digests identical on kernel variants {compared:?} and under MKL and ATen dispatch settings");
+    // And identical to every earlier build's: the sha256 of `key outputs` lines, pinned at
+    // 8e58d64 (refactors must not move a byte; a change that means to bumps a stage version).
+    let lines: String = reference.iter().map(|(k, o)| format!("{k} {o}\n")).collect();
+    use sha2::Digest;
+    let pinned: String = sha2::Sha256::digest(lines.as_bytes()).iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(pinned, SMOKE_BYTES, "the smoke pipeline's stored bytes changed:\n{lines}");
     // Recomputed on another variant, the scalar store's artifacts are the same bytes.
     let v = idrex(&["verify", "--store", scalar_store.to_str().unwrap(), "--recompute", "6"]);
     assert!(v.status.success(), "{}{}", stdout(&v), stderr(&v));
@@ -505,13 +511,16 @@ fn bytes_are_the_same_on_every_kernel_variant() {
     assert!(!bad.status.success() && stderr(&bad).contains("IDREX_KERNEL=avx9 is not a kernel variant"), "{}", stderr(&bad));
 }
 
+/// The smoke pipeline's artifacts, pinned: see the kernel-variants test.
+const SMOKE_BYTES: &str = "b88156a3bdbc14b75406be2df09e68b5a93b64157ac9362c75f51740b7b187e2";
+
 #[test]
 fn runs_in_two_pid_namespaces_share_a_store() {
     // Where unshare works (root, or user namespaces allowed): one run sees other pids than
     // the other, so staging ownership must not be judged by pid.
     let probe = Command::new("unshare").args(["--pid", "--fork", "--mount-proc", "true"]).output();
     if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: unshare --pid is not available here");
+        crate::util::skip("pipeline::runs_in_two_pid_namespaces_share_a_store", "unshare --pid is not available here");
         return;
     }
     let dir = TempDir::new("namespaces");
@@ -634,6 +643,6 @@ print("ok")
         let rep = idrex(&["report", "--store", fresh.to_str().unwrap(), "--out", report.to_str().unwrap()]);
         assert!(!rep.status.success() && stderr(&rep).contains("disagree on the demonstrations"), "{}", stderr(&rep));
     } else {
-        eprintln!("the disagreeing-demonstrations case skipped: {} is not here", npz.display());
+        crate::util::skip("pipeline::(the disagreeing-demonstrations case)", &format!("{} is not here", npz.display()));
     }
 }

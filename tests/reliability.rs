@@ -191,7 +191,7 @@ fn a_full_disk_fails_stages_cleanly_and_keeps_the_previous_recording() {
     // store needs about 3 MB, so stages fail for lack of space part-way.
     let probe = Command::new("unshare").args(["--mount", "sh", "-c", "mount -t tmpfs -o size=64k tmpfs /mnt"]).output();
     if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("skipped: cannot mount a tmpfs here");
+        crate::util::skip("reliability::a_full_disk_fails_stages_cleanly_and_keeps_the_previous_recording", "cannot mount a tmpfs here");
         return;
     }
     let dir = TempDir::new("diskfull");

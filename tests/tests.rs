@@ -12,3 +12,4 @@ mod pipeline;
 mod recording;
 mod reliability;
 mod rliable;
+mod skips;

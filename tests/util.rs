@@ -28,6 +28,25 @@ impl Drop for TempDir {
     }
 }
 
+/// Where skipped tests are recorded, one line each, for `./dev test` to count (the test
+/// harness can only call them passed).
+pub fn skip_ledger() -> PathBuf {
+    std::env::var_os("IDREX_SKIP_LEDGER")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("skipped-tests.txt"))
+}
+
+/// Skips the calling test: one line on the terminal, written past cargo's output capture
+/// (which takes only `print!` and `eprint!`), and one in the skip ledger. The caller returns.
+pub fn skip(test: &str, why: &str) {
+    use std::io::Write;
+    let line = format!("test {test} ... SKIPPED: {why}\n");
+    let _ = std::io::stderr().lock().write_all(line.as_bytes());
+    let ledger = std::fs::OpenOptions::new().create(true).append(true).open(skip_ledger());
+    // One write per line, appended: lines from tests running at once do not interleave.
+    let _ = ledger.and_then(|mut f| f.write_all(line.as_bytes()));
+}
+
 pub fn idrex(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_idrex")).args(args).output().expect("run idrex")
 }

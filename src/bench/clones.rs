@@ -9,13 +9,13 @@ use std::time::Instant;
 use anyhow::Context;
 
 use crate::algo::bc::BcConfig;
-use crate::cli::pipeline::{StoreAccess, load};
 use crate::env::Env;
 use crate::pipeline::config::{CloneConfig, CloneLabels, CloneSource, SourceActing};
-use crate::pipeline::expand;
+use crate::pipeline::{Pipeline, expand};
 use crate::pipeline::stage::idrex::clone;
 use crate::pipeline::stage::idrex::multi_bc;
 use crate::stats::median;
+use crate::store::Store;
 
 #[derive(Debug, clap::Args)]
 pub struct ClonesBenchArgs {
@@ -108,9 +108,9 @@ struct Row {
     seconds: f64,
 }
 
-pub fn clones_bench(args: &ClonesBenchArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), None, StoreAccess::Read)?;
-    let g = expand(&p)?;
+/// Runs the bench on `p`'s stored D-REX runs in `store` (the CLI loads both from `args`).
+pub fn clones_bench(args: &ClonesBenchArgs, p: &Pipeline, store: &Store) -> anyhow::Result<()> {
+    let g = expand(p)?;
     let keys = g.keys();
     // The D-REX runs of each environment and replicate: `<group>drex/ppo/<r>`.
     let mut groups: std::collections::BTreeMap<String, Vec<(usize, String)>> = Default::default();

@@ -3,7 +3,7 @@
 //! the library returns [`crate::Error`].
 mod env;
 mod logs;
-pub(crate) mod pipeline;
+mod pipeline;
 mod report;
 mod stage;
 mod store;
@@ -93,7 +93,10 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
         Command::Bench(BenchCommand::Learners(args)) => crate::bench::learners_bench(&args),
         Command::Bench(BenchCommand::Ppo(args)) => crate::bench::ppo_bench(&args),
-        Command::Bench(BenchCommand::Clones(args)) => crate::bench::clones::clones_bench(&args),
+        Command::Bench(BenchCommand::Clones(args)) => {
+            let (p, store) = pipeline::load(&args.file, args.store.as_deref(), None, pipeline::StoreAccess::Read)?;
+            crate::bench::clones::clones_bench(&args, &p, &store)
+        }
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),

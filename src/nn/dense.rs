@@ -9,9 +9,8 @@
 //! buffers, and callers feed batches in chunks of a few hundred rows, which stay in L2.
 //!
 //! Results are the same bits on every processor and thread count: the products and the
-//! elementwise passes sum in an order fixed by the shapes, and [`Trainer`] splits each batch
-//! into a fixed partition ([`LANES`]) whose gradients it sums in a fixed order, whatever the
-//! number of threads that compute them.
+//! elementwise passes sum in an order fixed by the shapes; training ([`super::trainer`])
+//! splits each batch into a fixed partition whose gradients it sums in a fixed order.
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
 use std::ops::Range;
 
@@ -19,11 +18,7 @@ use tch::Tensor;
 
 use super::bf16::{Precision, gemm_bf16};
 use super::gemm::gemm;
-use super::{Activation, FlushDenormals, Mlp};
-
-/// Every batch is split into this many lanes, whose gradients are summed in lane order; a
-/// lane is the unit of parallelism, so bytes do not depend on how many threads there are.
-pub const LANES: usize = 2;
+use super::{Activation, Mlp};
 
 /// A growable f32 buffer whose start is 64-byte aligned.
 #[derive(Clone, Default)]
@@ -66,15 +61,15 @@ impl std::ops::DerefMut for Buf {
 }
 
 #[derive(Debug, Clone, Copy)]
-struct Layer {
+pub(super) struct Layer {
     /// Offset of the `out x in` row-major weight in the flat parameters; the bias follows it.
-    w: usize,
-    inp: usize,
-    out: usize,
+    pub(super) w: usize,
+    pub(super) inp: usize,
+    pub(super) out: usize,
 }
 
 impl Layer {
-    fn b(&self) -> usize {
+    pub(super) fn b(&self) -> usize {
         self.w + self.inp * self.out
     }
 }
@@ -83,11 +78,11 @@ impl Layer {
 /// out as libtorch's Linear layers: per layer the `out x in` weight, then the bias.
 #[derive(Clone)]
 pub struct Dense {
-    layers: Vec<Layer>,
+    pub(super) layers: Vec<Layer>,
     pub params: Buf,
     /// Each layer's weight transposed (`in x out`, at the weight's offset), which the forward
     /// pass reads in place; [`Dense::refresh`] rewrites it after the parameters change.
-    wt: Buf,
+    pub(super) wt: Buf,
     /// The factors of the training products (inference, [`Dense::predict`] included, takes
     /// whatever this says; networks are made in f32).
     precision: Precision,
@@ -231,7 +226,7 @@ impl Dense {
     }
 
     /// Adds the gradient of `coef * sum of squared weights` (not biases) to `grads`: the
-    /// separate pass [`Trainer::step`] fuses, kept as the tests' reference.
+    /// separate pass [`super::trainer::Trainer::step`] fuses, kept as the tests' reference.
     #[cfg(test)]
     pub fn add_weight_l2(&self, coef: f32, grads: &mut [f32]) {
         for l in &self.layers {
@@ -248,7 +243,7 @@ impl Dense {
 /// Rows `rows` of the transpose (`inp x out`) of the `out x inp` row-major `w`, written to
 /// `dst` (those rows, `out` apart): `dst[(i - rows.start) * out + o] = w[o * inp + i]`.
 /// Register transposes of 8 x 8 blocks where the processor has AVX; bit moves either way.
-fn transpose_rows(w: &[f32], inp: usize, out: usize, rows: Range<usize>, dst: &mut [f32]) {
+pub(super) fn transpose_rows(w: &[f32], inp: usize, out: usize, rows: Range<usize>, dst: &mut [f32]) {
     let (i0, n) = (rows.start, rows.len());
     assert!(rows.end <= inp && w.len() >= inp * out && dst.len() >= n * out);
     #[cfg(target_arch = "x86_64")]
@@ -325,227 +320,6 @@ vectorised! {
 }
 
 #[cfg(test)]
-vectorised! {
-    /// One Adam update of `params` from `grads`, with moments `m` and `v`, step size `step`
-    /// (the learning rate over the first moment's bias correction) and `bc2s`, the square
-    /// root of the second moment's bias correction.
-    fn adam_update(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= step * *m / (v.sqrt() / bc2s + eps);
-        }
-    }
-}
-
-vectorised! {
-    /// [`adam_update`] on the gradient `g0 + g1` (two lanes' sums), plus `l2 * params` where
-    /// `weights`: the bits of summing into a buffer, adding the L2 term and updating, one
-    /// pass instead of four.
-    #[allow(clippy::too_many_arguments)]
-    fn adam_update_lanes(params: &mut [f32], g0: &[f32], g1: &[f32], weights: bool, l2: f32, m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
-        for ((((p, &g0), &g1), m), v) in params.iter_mut().zip(g0).zip(g1).zip(m.iter_mut()).zip(v.iter_mut()) {
-            let sum = g0 + g1;
-            let g = if weights { sum + l2 * *p } else { sum };
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= step * *m / (v.sqrt() / bc2s + eps);
-        }
-    }
-}
-
-/// Adam (betas 0.9 and 0.999, eps 1e-8, no weight decay), as libtorch's: the bias-corrected
-/// step `lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)`.
-pub struct Adam {
-    lr: f32,
-    m: Buf,
-    v: Buf,
-    t: i32,
-}
-
-impl Adam {
-    pub fn new(len: usize, lr: f64) -> Self {
-        Adam { lr: lr as f32, m: Buf::zeros(len), v: Buf::zeros(len), t: 0 }
-    }
-
-    /// One update from a summed gradient: the separate pass [`Trainer::step`] fuses, kept
-    /// as the tests' reference.
-    #[cfg(test)]
-    pub fn step(&mut self, params: &mut [f32], grads: &[f32]) {
-        let (step, bc2s) = self.advance();
-        adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
-    }
-
-    /// Counts a step; its step size and the square root of its second bias correction.
-    fn advance(&mut self) -> (f32, f32) {
-        self.t += 1;
-        (self.lr / (1.0 - 0.9f32.powi(self.t)), (1.0 - 0.999f32.powi(self.t)).sqrt())
-    }
-}
-
-/// What BC and T-REX share of a training run: the network, Adam, the lane threads and the
-/// summed gradient, with denormals flushed on the calling thread while it lives.
-pub struct Trainer {
-    pub net: Dense,
-    adam: Adam,
-    pool: LanePool,
-    l2: f32,
-    _ftz: FlushDenormals,
-}
-
-impl Trainer {
-    /// Trains `mlp`'s parameters with Adam at `lr` and `l2` x the sum of squared weights
-    /// added to the loss, on up to `threads` threads, its products at `precision`.
-    pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize, precision: Precision) -> Self {
-        let _ftz = FlushDenormals::new();
-        let net = Dense::from_mlp(mlp).with_precision(precision);
-        let adam = Adam::new(net.len(), lr);
-        Trainer { net, adam, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
-    }
-
-    /// Runs `f(lane, share, net)` for each of the [`LANES`] lanes, with the lane's share of
-    /// `batch`: a fixed partition into consecutive parts (the last may be shorter or empty).
-    pub fn run<L: Send, T: Sync>(&self, lanes: &mut [L], batch: &[T], f: impl Fn(&mut L, &[T], &Dense) + Sync) {
-        assert_eq!(lanes.len(), LANES, "one state per lane");
-        let per = batch.len().div_ceil(LANES);
-        let net = &self.net;
-        self.pool.run(lanes, |lane, k| f(lane, batch.get(k * per..((k + 1) * per).min(batch.len())).unwrap_or(&[]), net));
-    }
-
-    /// One Adam step on the lanes' gradients summed in lane order, plus the L2 term's, then
-    /// the transposed weights rewritten: both on the lane threads, split by parameters (then
-    /// by transposed rows), elementwise, so the split changes no bit. On the calling thread
-    /// alone they left BC's second thread idle much of each iteration.
-    pub fn step<'a>(&mut self, lane_grads: impl IntoIterator<Item = &'a [f32]>) {
-        const _: () = assert!(LANES == 2, "adam_update_lanes sums two lanes");
-        let lanes: Vec<&[f32]> = lane_grads.into_iter().collect();
-        let [g0, g1] = lanes[..] else { panic!("one gradient per lane") };
-        let (step, bc2s) = self.adam.advance();
-        let l2 = 2.0 * self.l2;
-        let Dense { layers, params, wt, .. } = &mut self.net;
-        let mut shares = AdamShare::split(params, &mut self.adam.m, &mut self.adam.v);
-        let layers = &layers[..];
-        self.pool.run(&mut shares, |share, _| {
-            // Each layer's weights, then its biases, in the parameters' order.
-            for (r, weights) in layers.iter().flat_map(|l| [(l.w..l.b(), true), (l.b()..l.b() + l.out, false)]) {
-                let (a, b) = (r.start.max(share.start), r.end.min(share.start + share.params.len()));
-                if a < b {
-                    let at = a - share.start..b - share.start;
-                    let (p, m, v) = (&mut share.params[at.clone()], &mut share.m[at.clone()], &mut share.v[at]);
-                    adam_update_lanes(p, &g0[a..b], &g1[a..b], weights, l2, m, v, step, bc2s);
-                }
-            }
-        });
-        let params = &params[..];
-        let mut shares = TransposeShare::split(layers, wt);
-        self.pool.run(&mut shares, |share, _| {
-            for t in share.iter_mut() {
-                transpose_rows(&params[t.layer.w..t.layer.b()], t.layer.inp, t.layer.out, t.rows.clone(), t.dst);
-            }
-        });
-    }
-
-    /// Writes the parameters back into `mlp`; false (writing nothing) if any is not finite.
-    pub fn write_to(&self, mlp: &Mlp) -> bool {
-        let finite = self.net.params.iter().all(|p| p.is_finite());
-        if finite {
-            self.net.write_to(mlp);
-        }
-        finite
-    }
-}
-
-/// A lane's share of an Adam step: the parameters from `start` on, with their moments.
-struct AdamShare<'a> {
-    start: usize,
-    params: &'a mut [f32],
-    m: &'a mut [f32],
-    v: &'a mut [f32],
-}
-
-impl<'a> AdamShare<'a> {
-    /// [`LANES`] consecutive shares, all but the last a multiple of 16 floats long.
-    fn split(mut params: &'a mut [f32], mut m: &'a mut [f32], mut v: &'a mut [f32]) -> Vec<Self> {
-        let per = params.len().div_ceil(LANES).next_multiple_of(16);
-        (0..LANES)
-            .map(|k| {
-                let take = per.min(params.len());
-                let (p, p_rest) = std::mem::take(&mut params).split_at_mut(take);
-                let (mk, m_rest) = std::mem::take(&mut m).split_at_mut(take);
-                let (vk, v_rest) = std::mem::take(&mut v).split_at_mut(take);
-                (params, m, v) = (p_rest, m_rest, v_rest);
-                AdamShare { start: k * per, params: p, m: mk, v: vk }
-            })
-            .collect()
-    }
-}
-
-/// Rows `rows` of `layer`'s transposed weight, to be written to `dst`.
-struct TransposeShare<'a> {
-    layer: Layer,
-    rows: Range<usize>,
-    dst: &'a mut [f32],
-}
-
-impl<'a> TransposeShare<'a> {
-    /// Per lane, its consecutive part of every layer's rows of `wt` (laid out as the
-    /// parameters).
-    fn split(layers: &[Layer], mut wt: &'a mut [f32]) -> Vec<Vec<Self>> {
-        let mut shares: Vec<Vec<Self>> = (0..LANES).map(|_| Vec::new()).collect();
-        let mut at = 0;
-        for &layer in layers {
-            // Skip the previous layer's bias slots.
-            wt = &mut std::mem::take(&mut wt)[layer.w - at..];
-            at = layer.w;
-            let per = layer.inp.div_ceil(LANES);
-            for (k, share) in shares.iter_mut().enumerate() {
-                let rows = (k * per).min(layer.inp)..((k + 1) * per).min(layer.inp);
-                let (dst, rest) = std::mem::take(&mut wt).split_at_mut(rows.len() * layer.out);
-                wt = rest;
-                at += rows.len() * layer.out;
-                share.push(TransposeShare { layer, rows, dst });
-            }
-        }
-        shares
-    }
-}
-
-/// The threads that compute lanes, kept for a whole training run rather than started per
-/// step (with MKL, T-REX on two cores ran 113 model-iterations/s with a thread per step and
-/// 117-128 with the pool).
-pub struct LanePool(Option<rayon::ThreadPool>);
-
-impl LanePool {
-    /// Up to `threads` threads (none of them the caller's, which waits while they run).
-    pub fn new(threads: usize) -> Self {
-        if threads.min(LANES) <= 1 {
-            return LanePool(None);
-        }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.min(LANES))
-            .thread_name(|i| format!("idrex-lane-{i}"))
-            .start_handler(|_| {
-                // For the thread's whole life, which is the pool's.
-                std::mem::forget(FlushDenormals::new());
-            })
-            .build();
-        // Without threads to spare, the lanes run on the caller's thread: same result.
-        LanePool(pool.ok())
-    }
-
-    /// Runs `f(lane, k)` for every lane `k`.
-    pub fn run<T: Send>(&self, lanes: &mut [T], f: impl Fn(&mut T, usize) + Sync) {
-        use rayon::prelude::*;
-        match &self.0 {
-            None => lanes.iter_mut().enumerate().for_each(|(k, lane)| f(lane, k)),
-            Some(pool) => pool.install(|| lanes.par_iter_mut().enumerate().for_each(|(k, lane)| f(lane, k))),
-        }
-    }
-}
-
-#[cfg(test)]
 mod tests {
     use super::*;
     use crate::nn::Init;
@@ -557,7 +331,7 @@ mod tests {
     fn vectorised_passes_give_the_scalar_bits() {
         let n = 16 * 37 + 5;
         let vals = |k: f32| (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect::<Vec<f32>>();
-        let (g, h, p0) = (vals(0.37), vals(0.91), vals(0.13));
+        let (g, h) = (vals(0.37), vals(0.91));
         let width = n / 7;
         let rows = n / width;
         // ReLU backward with the bias gradient.
@@ -573,16 +347,6 @@ mod tests {
         }
         assert_eq!(bits(&got), bits(&want));
         assert_eq!(bits(&db), bits(&want_db));
-        // Adam.
-        let (mut p, mut m, mut v) = (p0.clone(), h.clone(), g.iter().map(|x| x * x).collect::<Vec<f32>>());
-        let (mut wp, mut wm, mut wv) = (p.clone(), m.clone(), v.clone());
-        adam_update(&mut p, &g, &mut m, &mut v, 1e-3 / 0.1, 0.0447);
-        for i in 0..n {
-            wm[i] = 0.9 * wm[i] + (1.0 - 0.9) * g[i];
-            wv[i] = 0.999 * wv[i] + (1.0 - 0.999) * g[i] * g[i];
-            wp[i] -= 1e-3 / 0.1 * wm[i] / (wv[i].sqrt() / 0.0447 + 1e-8);
-        }
-        assert_eq!((bits(&p), bits(&m), bits(&v)), (bits(&wp), bits(&wm), bits(&wv)));
         // Bias and ReLU.
         let mut y = g.clone();
         add_bias(&mut y[..rows * width], &h[..width], true);
@@ -626,68 +390,6 @@ mod tests {
         assert_eq!(grads.len(), want.len());
         for (i, (g, w)) in grads.iter().zip(&want).enumerate() {
             assert!((g - w).abs() < 1e-4 * (1.0 + w.abs()), "parameter {i}: {g} vs {w}");
-        }
-    }
-
-    /// The trainer's step (fused, split over the lane threads) gives the bits of the passes
-    /// it replaced, one after another on one thread: sum the lanes into a buffer, add the
-    /// L2 term, Adam, transpose. Widths off the 8 x 8 blocks and an odd split included.
-    #[test]
-    fn step_gives_the_bits_of_the_separate_passes() {
-        tch::manual_seed(11);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let mlp = Mlp::new(&vs.root(), &[17, 40, 29, 6], Activation::Relu, Init::Default);
-        for threads in [1, 2] {
-            let mut trainer = Trainer::new(&mlp, 1e-2, 0.01, threads, Precision::F32);
-            let mut want = Dense::from_mlp(&mlp);
-            let mut adam = Adam::new(want.len(), 1e-2);
-            for t in 0..3 {
-                let g0 = crate::nn::gemm::test_values(want.len(), 0.37 + t as f32);
-                let g1 = crate::nn::gemm::test_values(want.len(), 0.53 + t as f32);
-                let mut grads = g0.clone();
-                add_into(&mut grads, &g1);
-                want.add_weight_l2(0.01, &mut grads);
-                adam.step(&mut want.params, &grads);
-                want.refresh();
-                trainer.step([&g0[..], &g1[..]]);
-                assert_eq!(bits(&trainer.net.params), bits(&want.params), "threads {threads}, step {t}: parameters");
-                assert_eq!(bits(&trainer.net.wt), bits(&want.wt), "threads {threads}, step {t}: transposed weights");
-                assert_eq!((bits(&trainer.adam.m), bits(&trainer.adam.v)), (bits(&adam.m), bits(&adam.v)));
-            }
-        }
-        // And the transposes are transposes, every element.
-        let d = Dense::from_mlp(&mlp);
-        for l in &d.layers {
-            for (o, i) in (0..l.out).flat_map(|o| (0..l.inp).map(move |i| (o, i))) {
-                assert_eq!(d.wt[l.w + i * l.out + o].to_bits(), d.params[l.w + o * l.inp + i].to_bits());
-            }
-        }
-    }
-
-    #[test]
-    fn adam_matches_libtorch() {
-        use tch::nn::OptimizerConfig;
-        tch::manual_seed(5);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let mlp = Mlp::new(&vs.root(), &[3, 4, 1], Activation::Relu, Init::Default);
-        let mut dense = Dense::from_mlp(&mlp);
-        let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
-        let mut adam = Adam::new(dense.len(), 1e-2);
-        let x = Tensor::randn([6, 3], (Kind::Float, Device::Cpu));
-        let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
-        let mut s = Scratch::default();
-        for _ in 0..5 {
-            // loss = sum f(x)
-            opt.backward_step(&mlp.forward(&x).sum(Kind::Float));
-            dense.forward(&xs, 6, &mut s);
-            let mut grads = vec![0.0; dense.len()];
-            dense.backward(&xs, 6, &[1.0; 6], &mut s, &mut grads);
-            adam.step(&mut dense.params, &grads);
-            dense.refresh();
-        }
-        let after = Dense::from_mlp(&mlp);
-        for (a, b) in dense.params.iter().zip(after.params.iter()) {
-            assert!((a - b).abs() < 1e-5, "{a} vs {b}");
         }
     }
 }

@@ -1,6 +1,10 @@
-//! Neural networks on tch: MLP blocks, the Gaussian actor-critic, the T-REX reward net and
-//! ensembles, and a pure-Rust copy of an MLP for per-step inference in rollouts (one
-//! observation at a time, where libtorch's per-call overhead would dominate).
+//! Neural networks. Their definitions and storage are libtorch modules (tch): MLP blocks
+//! ([`mlp`]), the Gaussian actor-critic ([`policy`]), the T-REX reward nets and ensembles
+//! ([`reward`]), saved as safetensors with a JSON sidecar ([`sidecar`]). What computes on the
+//! CPU is idrex's own code, the same bits on every processor: initial weights ([`init`]),
+//! the matrix products ([`gemm`], [`bf16`]), training and batch inference of ReLU MLPs
+//! ([`dense`], [`trainer`]) and per-step inference in rollouts ([`cpu`]). [`device`] picks
+//! libtorch's GPU where asked.
 /// Elementwise passes, each compiled twice, for AVX-512 (where the active [`gemm::Kernel`] is
 /// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
 /// passes are independent per element or sum over rows in row order, and Rust neither
@@ -39,6 +43,7 @@ pub mod mlp;
 pub mod policy;
 pub mod reward;
 pub mod sidecar;
+pub mod trainer;
 
 pub use cpu::MlpCpu;
 pub use device::{Device, DeviceChoice};

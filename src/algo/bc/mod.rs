@@ -8,7 +8,8 @@ use tch::{Kind, Tensor};
 
 use crate::data::{RunningMeanStd, Trajectory};
 use crate::error::{Error, Result};
-use crate::nn::dense::{Buf, LANES, Scratch, Trainer};
+use crate::nn::dense::{Buf, Scratch};
+use crate::nn::trainer::{LANES, Trainer};
 use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
 
 mod torch;

@@ -1,13 +1,15 @@
 //! PPO for continuous actions, read top to bottom like CleanRL's `ppo_continuous_action.py`:
 //! collect a rollout ([`collect`]), turn its rewards into scaled rewards, let the
-//! [`RolloutBuffer`] bootstrap truncations and compute GAE, run the [`update`], log. The
+//! [`RolloutBuffer`] compute GAE (bootstrapping truncations where asked), run the
+//! [`update`], log. The
 //! implementation details that matter on MuJoCo: clipped surrogate and clipped value loss,
 //! per-minibatch advantage normalisation, running observation normalisation (clipped to
 //! +-10), return-based reward scaling (clipped to +-10), linear learning-rate annealing,
 //! gradient-norm clipping, orthogonal initialisation and a state-independent log-std.
 //!
-//! Departure from CleanRL, on purpose: a truncated episode is bootstrapped
-//! (r += gamma * V(s_final), as SB3 does) instead of being treated as terminal.
+//! A truncated episode is treated as terminal by default, as CleanRL and the original code's
+//! PPO2 do; `bootstrap_truncation` bootstraps it instead (r += gamma * V(s_final), as SB3
+//! does), which did worse on learned rewards.
 //! The reward is pluggable: the environment's, or a learned [`RewardEnsemble`] (evaluated in
 //! one batch per rollout on the next observations, minus its control cost).
 mod buffer;

@@ -7,15 +7,17 @@
 //! canonical JSON goes into the node's key, and its metrics are stored in the manifest as
 //! JSON and read back through the same [`Metrics`] structs by plots and the report.
 //!
+//! The versions are [`StageKind::version`]'s (a test compares them).
+//!
 //! | kind | version | inputs | outputs | file |
 //! |---|---|---|---|---|
-//! | demonstrator | 2 | - | policy/ | demos.rs |
+//! | demonstrator | 3 | - | policy/ | demos.rs |
 //! | demos | 1 | policy | rollouts.mcap | demos.rs |
 //! | demos-import | 1 | - (a file) | rollouts.mcap | demos.rs |
 //! | bc | 3 | demos | policy/ | bc.rs |
 //! | noise-rollouts | 1 | policy | rollouts.mcap | noise.rs |
 //! | trex | 3 | set0..setN, demos | reward/ | trex.rs |
-//! | ppo | 2 | reward | policy/, curve.csv | ppo.rs |
+//! | ppo | 3 | reward | policy/, curve.csv | ppo.rs |
 //! | eval | 2 | policy, reward?, demos | rollouts.mcap | eval.rs |
 //! | interpolation-rollouts | 1 | policy<r>, older<r> | rollouts.mcap | idrex/interpolation.rs |
 //! | action-noise-rollouts | 1 | policy<r> | rollouts.mcap | idrex/action_noise.rs |
