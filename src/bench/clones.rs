@@ -155,7 +155,7 @@ pub fn clones_bench(args: &ClonesBenchArgs, p: &Pipeline, store: &Store) -> anyh
                 let t0 = Instant::now();
                 let made = clone::make(&mut env, dir, step, &cfg, id, node.seed, r, args.threads, crate::nn::Device::Cpu)?;
                 let seconds = t0.elapsed().as_secs_f64();
-                let fidelity = clone::Fidelity::of(&made.source_episodes, &made.fidelity_episodes, random);
+                let fidelity = crate::algo::scoring::Fidelity::of(&made.source_episodes, &made.fidelity_episodes, random);
                 let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
                 let len = |v: &[usize]| v.iter().sum::<usize>() as f64 / v.len().max(1) as f64;
                 println!(

@@ -42,7 +42,7 @@ fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Optio
         }
     }
     for (prefix, runs) in groups {
-        let chosen = crate::pipeline::stage::eval::select(&runs.iter().map(|(_, x)| x.checkpoints.as_slice()).collect::<Vec<_>>());
+        let chosen = crate::algo::scoring::select(&runs.iter().map(|(_, x)| x.checkpoints.as_slice()).collect::<Vec<_>>());
         for (run, x) in &runs {
             let e = format!("{}/run{run}", entity(prefix));
             let (true_e, learned_e) = (format!("checkpoints_true/{e}"), format!("checkpoints_learned/{e}"));

@@ -21,12 +21,12 @@ use polars::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
-use crate::pipeline::stage::eval::CheckpointEval;
+use crate::algo::scoring::CheckpointEval;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::stats::spearman;
 use crate::store::{Manifest, Store};
 
-pub use crate::pipeline::stage::eval::{Selection, select};
+pub use crate::algo::scoring::{Selection, select};
 pub use notes::notes;
 use protocols::RESAMPLES;
 pub use protocols::{Protocol, ProtocolRow, protocols_frame};

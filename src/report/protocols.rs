@@ -6,7 +6,7 @@ use polars::prelude::*;
 use super::{Table, num, pe};
 use crate::error::Result;
 use crate::pipeline::Method;
-use crate::pipeline::stage::eval::{CheckpointEval, select};
+use crate::algo::scoring::{CheckpointEval, select};
 use crate::stats::{ReturnStats, bootstrap_ci};
 
 /// Which policy of each PPO run a figure is measured on.

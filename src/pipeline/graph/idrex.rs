@@ -175,7 +175,7 @@ mod tests {
     #[test]
     fn multi_bc_metrics_round_trip_through_json() {
         use crate::pipeline::stage::{Metrics, StageKind};
-        let fidelity = clone::Fidelity::of(&[], &[], 0.0);
+        let fidelity = crate::algo::scoring::Fidelity::of(&[], &[], 0.0);
         assert!(fidelity.normalised.is_nan());
         let record = clone::CloneRecord {
             clone: 1,

@@ -13,6 +13,7 @@ use crate::nn::{ActorCritic, RewardEnsemble};
 use crate::pipeline::config::Method;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
+use crate::algo::scoring::{CheckpointEval, learned_score, member_stats};
 use crate::stats::{nan_as_null, pairwise_accuracy, pearson, spearman};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,31 +56,6 @@ pub struct RewardAccuracy {
     pub pairwise_accuracy: f64,
 }
 
-/// What the learned ensemble says of one checkpoint's episodes (means over the episodes).
-/// Each member's return is measured in its own units relative to the demonstrations:
-/// `z_m = sum_t (r_m(s_t) - mu_m) / sigma_m`, with mu_m and sigma_m the member's per-step
-/// mean and std over the demonstrations' steps, so that members (whose scale and offset
-/// T-REX leaves free) can be compared.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct LearnedScore {
-    /// The ensemble mean of each member's summed raw reward.
-    pub mean: f64,
-    /// min over members of z_m: the most pessimistic member's view.
-    pub pessimistic: f64,
-    /// std over members of z_m: the members' disagreement.
-    pub spread: f64,
-}
-
-/// One checkpoint's evaluation.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct CheckpointEval {
-    /// PPO's global step when the checkpoint was taken.
-    pub step: usize,
-    /// Ground-truth return of each episode.
-    pub returns: Vec<f64>,
-    pub learned: Option<LearnedScore>,
-}
-
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EvalMetrics {
     /// The final policy.
@@ -91,42 +67,6 @@ pub struct EvalMetrics {
     /// checkpoints (BC).
     #[serde(default)]
     pub checkpoints: Vec<CheckpointEval>,
-}
-
-/// Each member's per-step mean and std over a set of trajectories.
-pub(crate) fn member_stats(model: &RewardEnsemble, trajs: &[Trajectory]) -> Vec<(f64, f64)> {
-    let mut sums = vec![(0.0f64, 0.0f64, 0usize); model.nets.len()];
-    for t in trajs {
-        for (s, r) in sums.iter_mut().zip(model.raw(t.next_obs(), &t.actions)) {
-            for x in r {
-                s.0 += x as f64;
-                s.1 += (x as f64).powi(2);
-                s.2 += 1;
-            }
-        }
-    }
-    sums.into_iter()
-        .map(|(sum, sq, n)| {
-            let n = n.max(1) as f64;
-            let mean = sum / n;
-            (mean, (sq / n - mean * mean).max(0.0).sqrt().max(1e-8))
-        })
-        .collect()
-}
-
-fn learned_score(model: &RewardEnsemble, reference: &[(f64, f64)], trajs: &[Trajectory]) -> LearnedScore {
-    let (mut mean, mut pessimistic, mut spread) = (0.0, 0.0, 0.0);
-    for t in trajs {
-        let raw = model.raw(t.next_obs(), &t.actions);
-        let sums: Vec<f64> = raw.iter().map(|r| r.iter().map(|&x| x as f64).sum()).collect();
-        let z: Vec<f64> = sums.iter().zip(reference).map(|(s, (mu, sigma))| (s - mu * t.len() as f64) / sigma).collect();
-        let zm = z.iter().sum::<f64>() / z.len() as f64;
-        mean += sums.iter().sum::<f64>() / sums.len() as f64;
-        pessimistic += z.iter().copied().fold(f64::INFINITY, f64::min);
-        spread += (z.iter().map(|x| (x - zm).powi(2)).sum::<f64>() / z.len() as f64).sqrt();
-    }
-    let n = trajs.len().max(1) as f64;
-    LearnedScore { mean: mean / n, pessimistic: pessimistic / n, spread: spread / n }
 }
 
 pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
@@ -190,40 +130,4 @@ pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     };
     ctx.write_rollouts(p.env, &trajs, learned.as_deref())?;
     Ok(EvalMetrics { summary: RolloutSummary::of(&trajs), reward: accuracy, checkpoints })
-}
-
-/// The checkpoints a method's runs chose, pooled over the runs (the steps every run has).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Selection {
-    /// The highest pooled true return: the paper's protocol.
-    pub by_ground_truth: Option<usize>,
-    /// The highest pooled pessimistic learned return, where every run has learned scores.
-    pub without_ground_truth: Option<usize>,
-}
-
-/// Chooses checkpoints from the runs' checkpoint evaluations (one slice per run): the
-/// report's protocols and multi-BC's `source: checkpoint` choose with this.
-pub fn select(runs: &[&[CheckpointEval]]) -> Selection {
-    let mut steps: Vec<usize> = runs.first().map(|r| r.iter().map(|c| c.step).collect()).unwrap_or_default();
-    steps.retain(|s| runs.iter().all(|r| r.iter().any(|c| c.step == *s)));
-    let at = |r: &[CheckpointEval], s: usize| r.iter().find(|c| c.step == s).cloned().expect("a common step");
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    Selection {
-        by_ground_truth: argmax(&steps, |s| Some(mean(&runs.iter().flat_map(|r| at(r, s).returns).collect::<Vec<_>>()))),
-        without_ground_truth: argmax(&steps, |s| {
-            runs.iter().map(|r| at(r, s).learned.map(|l| l.pessimistic)).collect::<Option<Vec<_>>>().map(|v| mean(&v))
-        }),
-    }
-}
-
-/// The step maximising `score` (the earliest on ties), if any.
-fn argmax(steps: &[usize], score: impl Fn(usize) -> Option<f64>) -> Option<usize> {
-    let mut best: Option<(usize, f64)> = None;
-    for &s in steps {
-        let Some(v) = score(s) else { return None };
-        if best.is_none_or(|(_, b)| v > b) {
-            best = Some((s, v));
-        }
-    }
-    best.map(|(s, _)| s)
 }

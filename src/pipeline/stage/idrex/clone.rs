@@ -13,41 +13,7 @@ use crate::pipeline::config::{CloneConfig, CloneLabels, SourceActing};
 use crate::pipeline::stage::load_policy_for;
 use crate::rollout::{self, Actor, PolicyActor, UniformActor};
 use crate::seed::{self, Purpose};
-use crate::stats::nan_as_null;
-
-/// How true a clone is to its source, on the ground truth (recorded for the reader only).
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Fidelity {
-    pub source_lengths: Vec<usize>,
-    pub source_returns: Vec<f64>,
-    /// The clone's noise-free episodes.
-    pub clone_lengths: Vec<usize>,
-    pub clone_returns: Vec<f64>,
-    /// (clone - random) / (source - random) of the mean returns: 1 is as good as the source,
-    /// 0 as the uniform-random policy. Null where the source is within 100 of random.
-    #[serde(with = "nan_as_null")]
-    pub normalised: f64,
-    /// The clone's mean episode length over the source's.
-    pub length_ratio: f64,
-}
-
-impl Fidelity {
-    /// A source at least this far above random has a normalised fidelity.
-    pub const MIN_SOURCE_ABOVE_RANDOM: f64 = 100.0;
-
-    pub fn of(source: &[Trajectory], clone: &[Trajectory], random_return: f64) -> Fidelity {
-        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-        let (source_returns, clone_returns): (Vec<f64>, Vec<f64>) =
-            (source.iter().map(Trajectory::ret).collect(), clone.iter().map(Trajectory::ret).collect());
-        let (source_lengths, clone_lengths): (Vec<usize>, Vec<usize>) =
-            (source.iter().map(Trajectory::len).collect(), clone.iter().map(Trajectory::len).collect());
-        let gap = mean(&source_returns) - random_return;
-        let normalised = if gap >= Self::MIN_SOURCE_ABOVE_RANDOM { (mean(&clone_returns) - random_return) / gap } else { f64::NAN };
-        let lengths = |v: &[usize]| mean(&v.iter().map(|&l| l as f64).collect::<Vec<_>>());
-        let length_ratio = lengths(&clone_lengths) / lengths(&source_lengths).max(1.0);
-        Fidelity { source_lengths, source_returns, clone_lengths, clone_returns, normalised, length_ratio }
-    }
-}
+use crate::algo::scoring::Fidelity;
 
 /// One clone's record in the stage's metrics.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

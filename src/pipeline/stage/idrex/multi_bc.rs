@@ -8,10 +8,11 @@
 //!
 //! The report removed, by hand, clones whose trajectories were worse than the previous
 //! iteration's. Here a filter ([`CloneFilter`]) can do it without the ground truth, by the
-//! learned reward per step ([`per_step_score`]), or keep every clone (the original code).
+//! learned reward per step ([`crate::algo::scoring::per_step_score`]), or keep every clone (the original code).
 use std::path::Path;
 
-use super::clone::{self, CloneRecord, Fidelity};
+use super::clone::{self, CloneRecord};
+use crate::algo::scoring::{Fidelity, demo_scale, per_step_score, select};
 use crate::algo::noise;
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
@@ -55,34 +56,6 @@ impl Metrics {
     }
 }
 
-/// How much better, per step and in units of the demonstrations, `trajs` score than
-/// `baseline` under `reward`: for each member m, the difference of the mean over episodes of
-/// each episode's mean per-step reward, over the member's per-step standard deviation on the
-/// demonstrations; averaged over members. Neither the episodes' lengths nor the members'
-/// offsets (which T-REX leaves unidentified) change it, nor the members' scales.
-/// Each member's per-step standard deviation over the demonstrations: the score's units.
-pub fn demo_scale(reward: &RewardEnsemble, demos: &[Trajectory]) -> Vec<f64> {
-    crate::pipeline::stage::eval::member_stats(reward, demos).into_iter().map(|(_, sd)| sd).collect()
-}
-
-/// (`scale`: [`demo_scale`].)
-pub fn per_step_score(reward: &RewardEnsemble, scale: &[f64], trajs: &[Trajectory], baseline: &[Trajectory]) -> f64 {
-    let members = reward.nets.len();
-    // Each member's per-step mean of each episode, averaged over episodes.
-    let level = |ts: &[Trajectory]| {
-        let mut sums = vec![0.0f64; members];
-        for t in ts.iter().filter(|t| !t.is_empty()) {
-            for (s, r) in sums.iter_mut().zip(reward.raw(t.next_obs(), &t.actions)) {
-                *s += r.iter().map(|&x| x as f64).sum::<f64>() / r.len() as f64;
-            }
-        }
-        let n = ts.iter().filter(|t| !t.is_empty()).count().max(1) as f64;
-        sums.into_iter().map(|s| s / n).collect::<Vec<_>>()
-    };
-    let (a, b) = (level(trajs), level(baseline));
-    (0..members).map(|m| (a[m] - b[m]) / scale[m]).sum::<f64>() / members as f64
-}
-
 /// The least noisy rollouts of a set.
 fn least_noisy(ts: &[Trajectory]) -> Vec<Trajectory> {
     let least = ts.iter().map(|t| t.meta.noise).fold(f64::INFINITY, f64::min);
@@ -103,7 +76,7 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
         }
     }
     let slices: Vec<&[_]> = runs.iter().map(Vec::as_slice).collect();
-    crate::pipeline::stage::eval::select(&slices)
+    select(&slices)
         .without_ground_truth
         .ok_or_else(|| Error::Invalid("multi-BC's source is `checkpoint`, but the source runs have no learned checkpoint scores".into()))
 }
@@ -168,61 +141,4 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     crate::log::mcap::write(&ctx.out.join(CLONES), p.env.name(), env.dt(), &extra, None)?;
     let baseline_set = baseline.filter(|_| p.filter != CloneFilter::None).map(|(i, _)| i);
     Ok(Metrics { random_return, baseline_set, clones, degradation: degradation(&kept) })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::nn::RewardConfig;
-
-    /// A trajectory of `len` steps whose observations are all `x`.
-    fn constant(len: usize, x: f32) -> Trajectory {
-        let (od, ad) = (2, 1);
-        Trajectory {
-            obs_dim: od,
-            act_dim: ad,
-            obs: vec![x; (len + 1) * od],
-            actions: vec![0.0; len * ad],
-            rewards: vec![0.0; len],
-            terms: vec![Default::default(); len],
-            ..Default::default()
-        }
-    }
-
-    /// The score compares rewards per step: an episode twice as long at the same per-step
-    /// reward scores the same, and shifting every member's output by a constant changes
-    /// nothing (while the summed return, the old filter's score, depends on both).
-    #[test]
-    fn per_step_score_ignores_length_and_offset() {
-        let cfg = RewardConfig { obs_dim: 2, act_dim: None, hidden: vec![8], models: 3, clip: 10.0, init: Default::default() };
-        let reward = crate::nn::seeded(3, || RewardEnsemble::new(cfg.clone()));
-        let demos = vec![constant(50, 0.3), constant(30, -0.2)];
-        let good = |x: f32| reward.raw(constant(1, x).next_obs(), &[0.0]).iter().map(|m| m[0] as f64).sum::<f64>();
-        // Two observation levels; `hi` is the one the ensemble prefers.
-        let (hi, lo) = if good(1.0) > good(-1.0) { (1.0, -1.0) } else { (-1.0, 1.0) };
-        let short_high = vec![constant(20, hi)];
-        let long_high = vec![constant(400, hi)];
-        let base = vec![constant(100, lo)];
-        let a = per_step_score(&reward, &demo_scale(&reward, &demos), &short_high, &base);
-        let b = per_step_score(&reward, &demo_scale(&reward, &demos), &long_high, &base);
-        assert!(a > 0.0, "{a}");
-        assert!((a - b).abs() < 1e-9 * a.abs(), "{a} vs {b}");
-        // The same ensemble with every output shifted by +5 (the last layer's bias).
-        let shifted = crate::nn::seeded(3, || RewardEnsemble::new(cfg.clone()));
-        tch::no_grad(|| {
-            for net in &shifted.nets {
-                let (_, b) = net.parameters().last().expect("a layer");
-                let _ = b.shallow_clone().g_add_scalar_(5.0);
-            }
-        });
-        let c = per_step_score(&shifted, &demo_scale(&shifted, &demos), &short_high, &base);
-        assert!((a - c).abs() < 1e-4 * a.abs(), "{a} vs {c}");
-        // Teeth: the summed predicted return of the short episode falls below the long
-        // baseline's once the offset is added, though its per-step reward is higher.
-        let summed = |m: &RewardEnsemble, t: &Trajectory| m.predicted_return(t.next_obs(), &t.actions);
-        assert!(summed(&shifted, &short_high[0]) < summed(&shifted, &base[0]));
-        // And it is symmetric: the baseline against the clone scores minus as much.
-        let d = per_step_score(&reward, &demo_scale(&reward, &demos), &base, &short_high);
-        assert!((a + d).abs() < 1e-9 * a.abs());
-    }
 }
