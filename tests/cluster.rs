@@ -176,7 +176,8 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     // find the blob repaired.
     let sharing = store.manifests().unwrap().iter().filter(|m| m.outputs.iter().any(|o| o.sha256 == blob.sha256)).count();
     assert_eq!(sharing, 4);
-    store.remote().unwrap().put(&format!("blobs/{}", blob.sha256), b"truncated".to_vec()).unwrap();
+    let bucket = idrex::store::s3::Remote::connect(BUCKET, "a").unwrap();
+    bucket.put(&format!("blobs/{}", blob.sha256), b"truncated".to_vec()).unwrap();
     let o = idrex(&base, &["verify", "--store", &s3("a")]);
     assert!(!o.status.success() && text(&o).contains(&victim.key), "{}", text(&o));
     let plan = ok(idrex(&base, &["pipeline", "status", smoke, "--store", &s3("a")]));

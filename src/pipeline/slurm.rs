@@ -275,8 +275,8 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
     let queue = Queue::read()?;
     let keys = graph.keys();
     // The jobs may start elsewhere: a local store is named by its absolute path.
-    let store_url = match store.remote() {
-        Some(_) => store.location(),
+    let store_url = match store.url() {
+        Some(url) => url.to_string(),
         None => std::path::absolute(store.root()).map_err(|e| Error::io(store.root(), e))?.display().to_string(),
     };
     let mut done: BTreeMap<String, Submission> = BTreeMap::new();

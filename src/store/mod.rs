@@ -21,7 +21,10 @@
 //! The same interface also fronts an S3-compatible bucket ([`s3`], `s3://bucket/prefix`):
 //! lookups, listings, verification and gc go to the bucket; a stage runs in a local cache
 //! directory laid out like a local store (inputs downloaded into it and checked, outputs
-//! published there first) and is then pushed, manifest last.
+//! published there first) and is then pushed, manifest last. The two differ only behind
+//! [`backend::Backend`]: the local directory and the bucket are its two implementations.
+mod backend;
+mod remote;
 pub mod s3;
 
 use std::fs::File;
@@ -31,9 +34,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::error::{Error, Result};
+use backend::{Backend, Local};
 
 mod claims;
-mod gc;
 mod location;
 mod locks;
 mod manifest;
@@ -46,7 +49,8 @@ pub use manifest::{MANIFEST, Manifest, OutputFile, TestSetMark, hash_outputs, ke
 pub struct Store {
     /// The store's directory; for an S3 store, the local cache it stages and reads through.
     root: PathBuf,
-    remote: Option<Arc<s3::Remote>>,
+    /// Where published artifacts live: this directory, or a bucket.
+    backend: Arc<dyn Backend>,
 }
 
 /// A stage's output directory before publication, owned through a lock on `<dir>.lock`.
@@ -98,7 +102,7 @@ impl Store {
     /// A handle for reading only (plan, report, verify): creates nothing, so that looking at a
     /// store never leaves `.tmp` and `.locks` behind, or a store where there was none.
     pub fn at(root: impl Into<PathBuf>) -> Self {
-        Store { root: root.into(), remote: None }
+        Store { root: root.into(), backend: Arc::new(Local) }
     }
 
     /// The store at `location`; `write` creates a local store's directory if needed. An S3
@@ -113,30 +117,25 @@ impl Store {
                 // here with one line instead of in the middle of a command.
                 remote.size("artifacts")?;
                 let cache = Store::open(Location::cache_dir(bucket, prefix))?;
-                Ok(Store { root: cache.root, remote: Some(Arc::new(remote)) })
+                Ok(Store { root: cache.root, backend: Arc::new(remote) })
             }
         }
     }
 
     /// The store's directory or URL, for messages.
     pub fn location(&self) -> String {
-        match &self.remote {
-            Some(r) => r.url.clone(),
-            None => self.root.display().to_string(),
-        }
+        self.backend.location(self)
     }
 
     /// Before checking many artifacts of an S3 store: one listing of its blobs instead of a
     /// request per file. (A local store needs nothing.)
     pub fn index(&self) -> Result<()> {
-        match &self.remote {
-            Some(r) => r.index_blobs(),
-            None => Ok(()),
-        }
+        self.backend.index()
     }
 
-    pub fn remote(&self) -> Option<&s3::Remote> {
-        self.remote.as_deref()
+    /// The URL a job on another machine opens; None for a local directory.
+    pub fn url(&self) -> Option<&str> {
+        self.backend.url()
     }
 
     /// Opens a store for writing, creating it if needed.
@@ -146,7 +145,7 @@ impl Store {
             let d = root.join(sub);
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
-        Ok(Store { root, remote: None })
+        Ok(Store { root, backend: Arc::new(Local) })
     }
 
     pub fn root(&self) -> &Path {
@@ -157,47 +156,21 @@ impl Store {
         self.root.join(key)
     }
 
-    /// The manifest of `key` if it is published and intact. A corrupt artifact is moved to
-    /// `.corrupt/` (so that it is recomputed) and reported as absent.
+    /// The manifest of `key` if it is published and intact. A corrupt local artifact is moved
+    /// to `.corrupt/` (so that it is recomputed) and reported as absent.
     pub fn lookup(&self, key: &str) -> Result<Option<Manifest>> {
-        if let Some(r) = &self.remote {
-            return Ok(match r.check(key)? {
-                Some(Ok(m)) => Some(m),
-                Some(Err(problem)) => {
-                    tracing::warn!("artifact {key} in {} is incomplete ({problem}); recomputing it", r.url);
-                    None
-                }
-                None => None,
-            });
-        }
-        self.local_lookup(key)
-    }
-
-    fn local_lookup(&self, key: &str) -> Result<Option<Manifest>> {
-        if !self.dir(key).exists() {
-            return Ok(None);
-        }
-        match self.check(key) {
-            Ok(m) => Ok(Some(m)),
-            Err(problem) => {
-                tracing::warn!("artifact {key} is corrupt ({problem}); recomputing it");
-                self.quarantine(key)?;
-                Ok(None)
-            }
-        }
+        self.backend.lookup(self, key)
     }
 
     /// Checks an artifact against its manifest; the error says what is wrong. (In an S3
     /// store: its manifest and that every blob exists with its size; the digests are checked
     /// when a blob is downloaded, and by [`Store::verify`].)
     pub fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
-        match &self.remote {
-            Some(r) => r.check(key).map_err(|e| e.to_string())?.unwrap_or_else(|| Err("not stored".into())),
-            None => self.local_check(key),
-        }
+        self.backend.check(self, key)
     }
 
-    fn local_check(&self, key: &str) -> std::result::Result<Manifest, String> {
+    /// Checks the local directory's copy of `key` against its manifest.
+    pub(super) fn local_check(&self, key: &str) -> std::result::Result<Manifest, String> {
         let dir = self.dir(key);
         let text = std::fs::read_to_string(dir.join(MANIFEST)).map_err(|e| format!("{MANIFEST}: {e}"))?;
         let m: Manifest = serde_json::from_str(&text).map_err(|e| format!("{MANIFEST}: {e}"))?;
@@ -213,7 +186,7 @@ impl Store {
         Ok(m)
     }
 
-    fn quarantine(&self, key: &str) -> Result<()> {
+    pub(super) fn quarantine(&self, key: &str) -> Result<()> {
         let bad = self.root.join(".corrupt");
         std::fs::create_dir_all(&bad).map_err(|e| Error::io(&bad, e))?;
         let to = bad.join(format!("{key}.{}", now_unix() as u64));
@@ -259,32 +232,7 @@ impl Store {
     pub fn publish(&self, staging: Staging, manifest: Manifest, replace: bool) -> Result<Manifest> {
         let key = staging.key.clone();
         let m = self.local_publish(staging, manifest, replace)?;
-        if let Some(r) = &self.remote {
-            // Publish what the cache holds under the key (a copy left by an earlier push that
-            // failed has the same bytes: outputs depend on the key alone).
-            let dir = self.dir(&key);
-            let local = self.local_check(&key).map_err(|p| Error::Invalid(format!("cached artifact {key}: {p}")))?;
-            if r.push(&dir, &local, replace)? == s3::Created::AlreadyThere {
-                match r.check(&key)? {
-                    Some(Ok(theirs)) if theirs.outputs == local.outputs => {
-                        tracing::info!("{key} was published to {} by another run first; keeping theirs", r.url)
-                    }
-                    Some(Ok(_)) => {
-                        // Same key, other bytes: a stage whose outputs are not a function of
-                        // its key. The store's copy stands; ours must not feed this machine.
-                        tracing::warn!(
-                            "{key} was published to {} by another run with different bytes (outputs that do not depend on the key alone); keeping theirs",
-                            r.url
-                        );
-                        self.quarantine(&key)?;
-                    }
-                    // A manifest whose blobs are gone: ours replaces it.
-                    _ => {
-                        r.push(&dir, &local, true)?;
-                    }
-                }
-            }
-        }
+        self.backend.published(self, &key, replace)?;
         Ok(m)
     }
 
@@ -292,32 +240,10 @@ impl Store {
     /// artifact is downloaded into the cache first (each file checked against its digest)
     /// unless the cache holds it intact.
     pub fn input_dir(&self, key: &str) -> Result<PathBuf> {
-        let dir = self.dir(key);
-        let Some(r) = &self.remote else { return Ok(dir) };
-        if self.local_check(key).is_ok() {
-            return Ok(dir);
-        }
-        let _lock = self.lock(key)?;
-        if self.local_check(key).is_ok() {
-            return Ok(dir);
-        }
-        if dir.exists() {
-            self.quarantine(key)?;
-        }
-        let m = match r.check(key)? {
-            Some(Ok(m)) => m,
-            Some(Err(problem)) => return Err(Error::Invalid(format!("artifact {key} in {} is incomplete: {problem}", r.url))),
-            None => return Err(Error::Invalid(format!("artifact {key} is not in {}", r.url))),
-        };
-        // The staging directory starts empty and `download` writes exactly the manifest's
-        // files, each checked against its digest, before anything is published.
-        let staging = self.stage(key)?;
-        r.download(&m, &staging.dir)?;
-        self.local_publish(staging, m, false)?;
-        Ok(dir)
+        self.backend.input_dir(self, key)
     }
 
-    fn local_publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
+    pub(super) fn local_publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
         manifest.key = staging.key.clone();
         manifest.outputs = hash_outputs(&staging.dir)?;
         for o in &manifest.outputs {
@@ -346,73 +272,29 @@ impl Store {
 
     /// Every published artifact's key (and anything else that sits where one would).
     pub fn keys(&self) -> Result<Vec<String>> {
-        if let Some(r) = &self.remote {
-            return r.keys();
-        }
-        let mut keys = Vec::new();
-        for e in std::fs::read_dir(&self.root).map_err(|e| Error::io(&self.root, e))? {
-            let e = e.map_err(|e| Error::io(&self.root, e))?;
-            let name = e.file_name().to_string_lossy().into_owned();
-            if !name.starts_with('.') {
-                keys.push(name);
-            }
-        }
-        keys.sort();
-        Ok(keys)
+        self.backend.keys(self)
     }
 
     /// Every artifact's manifest as written, without re-hashing its outputs: for statistics
     /// (stage-time estimates), never for trusting an artifact.
     pub fn unverified_manifests(&self) -> Result<Vec<Manifest>> {
-        if let Some(r) = &self.remote {
-            return Ok(r.keys()?.iter().filter_map(|k| r.manifest(k).ok().flatten()).collect());
-        }
-        Ok(self
-            .keys()?
-            .iter()
-            .filter_map(|k| std::fs::read_to_string(self.dir(k).join(MANIFEST)).ok())
-            .filter_map(|text| serde_json::from_str(&text).ok())
-            .collect())
+        self.backend.unverified_manifests(self)
     }
 
     /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
     pub fn manifests(&self) -> Result<Vec<Manifest>> {
-        if let Some(r) = &self.remote {
-            // A store that cannot be asked is an error, not an empty table.
-            r.index_blobs()?;
-            let mut out = Vec::new();
-            for k in r.keys()? {
-                if let Some(Ok(m)) = r.check(&k)? {
-                    out.push(m);
-                }
-            }
-            return Ok(out);
-        }
-        Ok(self.keys()?.iter().filter_map(|k| self.check(k).ok()).collect())
+        self.backend.manifests(self)
     }
 
     /// Re-hashes every artifact; returns (key, problem) for each corrupt one.
     pub fn verify(&self) -> Result<Vec<(String, String)>> {
-        if let Some(r) = &self.remote {
-            // Every blob downloaded and hashed: what a reader would get.
-            let mut bad = Vec::new();
-            for k in r.keys()? {
-                match r.check(&k)? {
-                    Some(Ok(m)) => {
-                        for o in &m.outputs {
-                            if let Some(problem) = r.blob_problem(&o.sha256, o.size)? {
-                                bad.push((k.clone(), format!("{}: {problem}", o.path)));
-                                break;
-                            }
-                        }
-                    }
-                    Some(Err(problem)) => bad.push((k, problem)),
-                    None => {}
-                }
-            }
-            return Ok(bad);
-        }
-        Ok(self.keys()?.into_iter().filter_map(|k| self.check(&k).err().map(|p| (k, p))).collect())
+        self.backend.verify(self)
+    }
+
+    /// Removes every artifact not in `keep` (and stale staging entries); returns what was
+    /// (or, with `dry_run`, would be) removed.
+    pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        self.backend.gc(self, keep, dry_run)
     }
 }
 
