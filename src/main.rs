@@ -12,7 +12,7 @@ fn main() -> ExitCode {
     // SAFETY: restoring the default disposition of a signal, before any thread starts.
     unsafe { signal(13, 0) };
     let cli = idrex::cli::Cli::parse();
-    if let Err(e) = idrex::nn::gemm::Kernel::from_env() {
+    if let Err(e) = idrex::kernels::gemm::Kernel::from_env() {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }

@@ -54,7 +54,12 @@ fn concrete_commands(line: &str) -> Option<Result<Vec<Vec<String>>, String>> {
     let line = line.trim();
     let rest = line.strip_prefix("idrex ").or_else(|| line.strip_prefix("./dev "))?;
     let rest = rest.split("  #").next().unwrap().split(" # ").next().unwrap();
-    let words: Vec<String> = rest.replace(['[', ']'], " ").split_whitespace().filter(|w| *w != "..." && *w != "|").map(|w| w.trim_end_matches("...").to_string()).collect();
+    let words: Vec<String> = rest
+        .replace(['[', ']'], " ")
+        .split_whitespace()
+        .filter(|w| *w != "..." && *w != "|")
+        .map(|w| w.trim_end_matches("...").to_string())
+        .collect();
     if matches!(words.first().map(String::as_str), Some("main" | "test") | None) {
         return None;
     }

@@ -323,9 +323,8 @@ fn no_module_or_folder_imports_one_that_imports_it_back() {
 #[test]
 fn a_folder_cycle_without_a_module_cycle_is_found() {
     let edge = |a: &str, b: &str| (a.to_string(), BTreeSet::from([b.to_string()]));
-    let edges: Edges = [edge("cli::x", "bench::y"), edge("bench::z", "cli::w"), edge("bench::y", "stats"), edge("cli::w", "stats")]
-        .into_iter()
-        .collect();
+    let edges: Edges =
+        [edge("cli::x", "bench::y"), edge("bench::z", "cli::w"), edge("bench::y", "stats"), edge("cli::w", "stats")].into_iter().collect();
     assert_eq!(find_cycle(&edges), None);
     let graphs = folder_graphs(&edges);
     assert_eq!(find_cycle(&graphs[""]), Some(vec!["bench".to_string(), "cli".into(), "bench".into()]));

@@ -11,9 +11,9 @@ use anyhow::Context;
 use crate::algo::bc::BcConfig;
 use crate::env::Env;
 use crate::pipeline::config::{CloneConfig, CloneLabels, CloneSource, SourceActing};
-use crate::pipeline::{Pipeline, expand};
 use crate::pipeline::stage::idrex::clone;
 use crate::pipeline::stage::idrex::multi_bc;
+use crate::pipeline::{Pipeline, expand};
 use crate::stats::median;
 use crate::store::Store;
 

@@ -5,7 +5,7 @@ use std::time::Instant;
 use anyhow::Context;
 
 use super::env::default_python;
-use crate::nn::bf16::Precision;
+use crate::kernels::bf16::Precision;
 use crate::nn::{Device, DeviceChoice};
 
 #[derive(Debug, clap::Args)]
@@ -103,8 +103,10 @@ fn hidden_layer_gflops() -> (f64, f64, f64) {
             })
             .fold(f64::INFINITY, f64::min)
     };
-    let ours = best(&mut || (0..reps).for_each(|_| crate::nn::gemm::gemm(false, false, m, n, k, &a, k, &b, n, 0.0, &mut c, n)));
-    let bf16 = best(&mut || (0..reps).for_each(|_| crate::nn::bf16::gemm_bf16(false, false, m, n, k, &a, k, &b, n, 0.0, &mut c, n)));
+    use crate::kernels::gemm::{Factor, Product};
+    let product = |a, b| Product { m, n, k, a: Factor::new(a, k), b: Factor::new(b, n), accumulate: false };
+    let ours = best(&mut || (0..reps).for_each(|_| crate::kernels::gemm::gemm(product(&a, &b), &mut c, n)));
+    let bf16 = best(&mut || (0..reps).for_each(|_| crate::kernels::bf16::gemm_bf16(product(&a, &b), &mut c, n)));
     crate::nn::single_threaded();
     let (ta, tb) = (tch::Tensor::from_slice(&a).view([m as i64, k as i64]), tch::Tensor::from_slice(&b).view([k as i64, n as i64]));
     let torch = best(&mut || (0..reps).for_each(|_| _ = ta.matmul(&tb)));
@@ -213,12 +215,12 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         "device": device.name(),
         "threads": threads,
         "gemm_gflops": peak,
-        "kernel": crate::nn::gemm::Kernel::active().name(),
+        "kernel": crate::kernels::gemm::Kernel::active().name(),
         "hidden_layer_one_thread": {
             "idrex_gflops": kernel_gflops, "libtorch_gflops": libtorch_gflops, "ratio": kernel_gflops / libtorch_gflops,
             "fraction_of_gemm_peak_per_thread": kernel_gflops / (peak / threads as f64),
             "idrex_bf16_gflops": bf16_gflops, "bf16_over_f32": bf16_gflops / kernel_gflops,
-            "bf16_path": crate::nn::bf16::Bf16Path::active().name(),
+            "bf16_path": crate::kernels::bf16::Bf16Path::active().name(),
         },
         "reward_inference_one_thread": {
             "idrex_rows_per_s": reward_rows, "libtorch_rows_per_s": torch_reward_rows, "ratio": reward_rows / torch_reward_rows,

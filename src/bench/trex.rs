@@ -75,7 +75,7 @@ fn summary(runs: &[Quality]) -> serde_json::Value {
 }
 
 pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
-    use crate::nn::bf16::{Bf16Path, Precision};
+    use crate::kernels::bf16::{Bf16Path, Precision};
     use crate::{algo::trex, stats};
     let policy = crate::nn::ActorCritic::load(&args.policy)?;
     let id: EnvId = policy.env.clone().context("the policy does not name its environment")?.parse()?;

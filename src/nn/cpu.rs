@@ -2,6 +2,7 @@
 //! Rollouts call a policy once per environment step; at these sizes (64 to 256 units) a
 //! direct loop is several times faster than a libtorch call and allocates nothing.
 use super::Activation;
+use crate::kernels::vectorised;
 
 #[derive(Debug, Clone)]
 pub struct MlpCpu {

@@ -1,5 +1,5 @@
 //! Training of ReLU MLPs (the BC policy, the T-REX reward nets) with explicit forward and
-//! backward passes over idrex's own matrix product ([`super::gemm`]), and inference of
+//! backward passes over idrex's own matrix product ([`crate::kernels::gemm`]), and inference of
 //! those networks on the CPU (the learned reward in PPO, evaluation and multi-BC).
 //!
 //! Why not autograd: at these shapes (256 units, batches of 128 rows for BC and 6,400 for
@@ -12,53 +12,13 @@
 //! elementwise passes sum in an order fixed by the shapes; training ([`super::trainer`])
 //! splits each batch into a fixed partition whose gradients it sums in a fixed order.
 //! `tests::matches_libtorch_autograd` checks outputs and gradients against libtorch.
-use std::ops::Range;
 
 use tch::Tensor;
 
-use super::bf16::{Precision, gemm_bf16};
-use super::gemm::gemm;
 use super::{Activation, Mlp};
-
-/// A growable f32 buffer whose start is 64-byte aligned.
-#[derive(Clone, Default)]
-pub struct Buf {
-    blocks: Vec<Block>,
-    len: usize,
-}
-
-#[derive(Clone, Copy)]
-#[repr(C, align(64))]
-struct Block([f32; 16]);
-
-impl Buf {
-    pub fn zeros(len: usize) -> Self {
-        let mut b = Buf::default();
-        b.resize(len);
-        b
-    }
-
-    /// Sets the length; new elements are zero, kept ones keep their values.
-    pub fn resize(&mut self, len: usize) {
-        self.blocks.resize(len.div_ceil(16), Block([0.0; 16]));
-        self.len = len;
-    }
-}
-
-impl std::ops::Deref for Buf {
-    type Target = [f32];
-    fn deref(&self) -> &[f32] {
-        // SAFETY: the blocks are contiguous f32s, at least `len` of them.
-        unsafe { std::slice::from_raw_parts(self.blocks.as_ptr().cast::<f32>(), self.len) }
-    }
-}
-
-impl std::ops::DerefMut for Buf {
-    fn deref_mut(&mut self) -> &mut [f32] {
-        // SAFETY: as above, uniquely borrowed.
-        unsafe { std::slice::from_raw_parts_mut(self.blocks.as_mut_ptr().cast::<f32>(), self.len) }
-    }
-}
+use crate::kernels::bf16::{Precision, gemm_bf16};
+use crate::kernels::gemm::{Factor, Product, gemm};
+use crate::kernels::{Buf, transpose_rows, vectorised};
 
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Layer {
@@ -121,25 +81,10 @@ impl Dense {
     }
 
     /// One product of the passes, at the network's precision.
-    #[allow(clippy::too_many_arguments)]
-    fn gemm(
-        &self,
-        ta: bool,
-        tb: bool,
-        m: usize,
-        n: usize,
-        k: usize,
-        a: &[f32],
-        lda: usize,
-        b: &[f32],
-        ldb: usize,
-        beta: f32,
-        c: &mut [f32],
-        ldc: usize,
-    ) {
+    fn gemm(&self, p: Product<'_>, c: &mut [f32], ldc: usize) {
         match self.precision {
-            Precision::F32 => gemm(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),
-            Precision::Bf16 => gemm_bf16(ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc),
+            Precision::F32 => gemm(p, c, ldc),
+            Precision::Bf16 => gemm_bf16(p, c, ldc),
         }
     }
 
@@ -183,7 +128,15 @@ impl Dense {
             let input: &[f32] = if i == 0 { x } else { &done[i - 1] };
             let y = &mut rest[0];
             y.resize(rows * l.out);
-            self.gemm(false, false, rows, l.out, l.inp, input, l.inp, &self.wt[l.w..l.b()], l.out, 0.0, y, l.out);
+            let p = Product {
+                m: rows,
+                n: l.out,
+                k: l.inp,
+                a: Factor::new(input, l.inp),
+                b: Factor::new(&self.wt[l.w..l.b()], l.out),
+                accumulate: false,
+            };
+            self.gemm(p, y, l.out);
             add_bias(y, &self.params[l.b()..l.b() + l.out], i < last);
         }
         &s.acts[last][..rows * self.output_dim()]
@@ -214,10 +167,19 @@ impl Dense {
             // The gradient with respect to this layer's outputs (its bias's is already added).
             let cur: &[f32] = if i == last { &dout[..rows * l.out] } else { d };
             let input: &[f32] = if i == 0 { x } else { &acts[i - 1] };
-            self.gemm(true, false, l.out, l.inp, rows, cur, l.out, input, l.inp, 1.0, &mut grads[l.w..l.b()], l.inp);
+            let p = Product { m: l.out, n: l.inp, k: rows, a: Factor::t(cur, l.out), b: Factor::new(input, l.inp), accumulate: true };
+            self.gemm(p, &mut grads[l.w..l.b()], l.inp);
             if i > 0 {
                 dprev.resize(rows * l.inp);
-                self.gemm(false, false, rows, l.inp, l.out, cur, l.out, &self.params[l.w..l.b()], l.inp, 0.0, dprev, l.inp);
+                let p = Product {
+                    m: rows,
+                    n: l.inp,
+                    k: l.out,
+                    a: Factor::new(cur, l.out),
+                    b: Factor::new(&self.params[l.w..l.b()], l.inp),
+                    accumulate: false,
+                };
+                self.gemm(p, dprev, l.inp);
                 let below = self.layers[i - 1];
                 relu_backward(dprev, input, &mut grads[below.b()..below.b() + below.out]);
                 std::mem::swap(d, dprev);
@@ -237,33 +199,6 @@ impl Dense {
     /// The sum of squared weights (not biases).
     pub fn weight_l2(&self) -> f64 {
         self.layers.iter().flat_map(|l| &self.params[l.w..l.b()]).map(|&w| (w as f64) * (w as f64)).sum()
-    }
-}
-
-/// Rows `rows` of the transpose (`inp x out`) of the `out x inp` row-major `w`, written to
-/// `dst` (those rows, `out` apart): `dst[(i - rows.start) * out + o] = w[o * inp + i]`.
-/// Register transposes of 8 x 8 blocks where the processor has AVX; bit moves either way.
-pub(super) fn transpose_rows(w: &[f32], inp: usize, out: usize, rows: Range<usize>, dst: &mut [f32]) {
-    let (i0, n) = (rows.start, rows.len());
-    assert!(rows.end <= inp && w.len() >= inp * out && dst.len() >= n * out);
-    #[cfg(target_arch = "x86_64")]
-    let (bi, bo) = if std::arch::is_x86_feature_detected!("avx") { (n - n % 8, out - out % 8) } else { (0, 0) };
-    #[cfg(not(target_arch = "x86_64"))]
-    let (bi, bo) = (0, 0);
-    #[cfg(target_arch = "x86_64")]
-    for r in (0..bi).step_by(8) {
-        for o in (0..bo).step_by(8) {
-            // SAFETY: AVX is present; rows o..o + 8 of w hold elements i0 + r..i0 + r + 8, and
-            // dst's rows r..r + 8 hold columns o..o + 8 (the extents asserted above).
-            unsafe { super::gemm::x86::transpose8(w.as_ptr().add(o * inp + i0 + r), inp, dst.as_mut_ptr().add(r * out + o), out) };
-        }
-    }
-    // The edges the blocks leave: the last columns of the blocks' rows, then the last rows.
-    for r in 0..n {
-        let from = if r < bi { bo } else { 0 };
-        for o in from..out {
-            dst[r * out + o] = w[o * inp + i0 + r];
-        }
     }
 }
 

@@ -5,39 +5,12 @@
 //! the matrix products ([`gemm`], [`bf16`]), training and batch inference of ReLU MLPs
 //! ([`dense`], [`trainer`]) and per-step inference in rollouts ([`cpu`]). [`device`] picks
 //! libtorch's GPU where asked.
-/// Elementwise passes, each compiled twice, for AVX-512 (where the active [`gemm::Kernel`] is
-/// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
-/// passes are independent per element or sum over rows in row order, and Rust neither
-/// reassociates nor fuses multiply-adds.
-macro_rules! vectorised {
-    ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) $body:block) => {
-        $(#[$doc])*
-        pub fn $name($($arg: $ty),*) {
-            #[inline(always)]
-            fn body($($arg: $ty),*) $body
-            #[cfg(target_arch = "x86_64")]
-            {
-                #[target_feature(enable = "avx512f")]
-                unsafe fn wide($($arg: $ty),*) {
-                    body($($arg),*)
-                }
-                if $crate::nn::gemm::Kernel::active() == $crate::nn::gemm::Kernel::Avx512 {
-                    // SAFETY: the variant is active only where the CPU has AVX-512F.
-                    return unsafe { wide($($arg),*) };
-                }
-            }
-            body($($arg),*)
-        }
-    };
-}
 
-pub(crate) use vectorised;
+use crate::kernels::vectorised;
 
-pub mod bf16;
 pub mod cpu;
 pub mod dense;
 pub mod device;
-pub mod gemm;
 pub mod init;
 pub mod mlp;
 pub mod policy;
@@ -63,48 +36,6 @@ pub fn all_finite(vs: &tch::nn::VarStore) -> bool {
 /// environments instead.
 pub fn single_threaded() {
     tch::set_num_threads(1);
-}
-
-/// While alive, the calling thread flushes denormal floats to zero (x86-64 MXCSR FTZ and
-/// DAZ). Adam's second moments of tiny gradients decay into the denormal range, where every
-/// operation is about a hundred times slower: with the original code's N(0, 0.02^2)
-/// initialisation, BC ran 4x slower after 3,000 iterations and kept slowing down. The
-/// setting is per thread and restored on drop, so the simulator and PPO never see it.
-pub struct FlushDenormals {
-    #[cfg(target_arch = "x86_64")]
-    saved: u32,
-}
-
-impl FlushDenormals {
-    #[allow(deprecated)] // _mm_getcsr/_mm_setcsr: no stable replacement for setting MXCSR
-    pub fn new() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            // SAFETY: reads and writes this thread's SSE control register only.
-            let saved = unsafe { std::arch::x86_64::_mm_getcsr() };
-            unsafe { std::arch::x86_64::_mm_setcsr(saved | 0x8040) };
-            FlushDenormals { saved }
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        FlushDenormals {}
-    }
-}
-
-impl Default for FlushDenormals {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Drop for FlushDenormals {
-    #[allow(deprecated)]
-    fn drop(&mut self) {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: restores this thread's SSE control register.
-        unsafe {
-            std::arch::x86_64::_mm_setcsr(self.saved)
-        };
-    }
 }
 
 vectorised! {

@@ -12,9 +12,10 @@
 //! (see `pipeline::stage::kind`).
 use std::ops::Range;
 
-use super::bf16::Precision;
-use super::dense::{Buf, Dense, Layer, transpose_rows};
-use super::{FlushDenormals, Mlp};
+use super::Mlp;
+use super::dense::{Dense, Layer};
+use crate::kernels::bf16::Precision;
+use crate::kernels::{Buf, FlushDenormals, transpose_rows, vectorised};
 
 /// Every batch is split into this many lanes, whose gradients are summed in lane order; a
 /// lane is the unit of parallelism, so bytes do not depend on how many threads there are.
@@ -290,8 +291,8 @@ mod tests {
             let mut want = Dense::from_mlp(&mlp);
             let mut adam = Adam::new(want.len(), 1e-2);
             for t in 0..3 {
-                let g0 = crate::nn::gemm::test_values(want.len(), 0.37 + t as f32);
-                let g1 = crate::nn::gemm::test_values(want.len(), 0.53 + t as f32);
+                let g0 = crate::kernels::gemm::test_values(want.len(), 0.37 + t as f32);
+                let g1 = crate::kernels::gemm::test_values(want.len(), 0.53 + t as f32);
                 let mut grads = g0.clone();
                 add_into(&mut grads, &g1);
                 want.add_weight_l2(0.01, &mut grads);

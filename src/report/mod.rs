@@ -19,9 +19,9 @@ pub mod studies;
 
 use polars::prelude::*;
 
+use crate::algo::scoring::CheckpointEval;
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
-use crate::algo::scoring::CheckpointEval;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::stats::spearman;
 use crate::store::{Manifest, Store};

@@ -4,9 +4,9 @@
 use polars::prelude::*;
 
 use super::{Table, num, pe};
+use crate::algo::scoring::{CheckpointEval, select};
 use crate::error::Result;
 use crate::pipeline::Method;
-use crate::algo::scoring::{CheckpointEval, select};
 use crate::stats::{ReturnStats, bootstrap_ci};
 
 /// Which policy of each PPO run a figure is measured on.

@@ -34,7 +34,7 @@ pub struct Manifest {
     pub ended_unix: f64,
     pub wall_s: f64,
     pub idrex_version: String,
-    /// The CPU code path (the [`crate::nn::gemm::Kernel`] variant, and the bf16 path where a
+    /// The CPU code path (the [`crate::kernels::gemm::Kernel`] variant, and the bf16 path where a
     /// stage trains in bf16: `Params::cpu_path`), as information
     /// only: every variant gives the same bytes. Absent from manifests written before it was
     /// recorded.

@@ -8,7 +8,8 @@ use tch::{Kind, Tensor};
 
 use crate::data::{RunningMeanStd, Trajectory};
 use crate::error::{Error, Result};
-use crate::nn::dense::{Buf, Scratch};
+use crate::kernels::Buf;
+use crate::nn::dense::Scratch;
 use crate::nn::trainer::{LANES, Trainer};
 use crate::nn::{ActorCritic, Device, PolicyConfig, WeightInit};
 
@@ -352,7 +353,7 @@ impl<W> Stopper<W> {
 fn train_dense(mut data: Data, cfg: &BcConfig, seed: u64, workers: usize) -> Result<(ActorCritic, BcReport)> {
     let (od, ad) = (data.od, data.ad);
     let policy = data.policy(cfg, seed);
-    let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers, crate::nn::bf16::Precision::F32);
+    let mut trainer = Trainer::new(&policy.actor, cfg.lr, cfg.l2, workers, crate::kernels::bf16::Precision::F32);
     let mut lanes: Vec<Lane> = (0..LANES)
         .map(|_| Lane {
             scratch: Scratch::default(),

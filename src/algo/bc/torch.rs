@@ -16,7 +16,7 @@ pub(crate) fn train_torch(mut data: Data, cfg: &BcConfig, seed: u64, dev: tch::D
     let all: Vec<usize> = (0..data.x.len() / data.od).collect();
     let (xs, ys) = (data.gather(&all, false).to_device(dev), data.gather(&all, true).to_device(dev));
     let mut opt = tch::nn::Adam::default().build(&policy.vs, cfg.lr)?;
-    let _ftz = crate::nn::FlushDenormals::new();
+    let _ftz = crate::kernels::FlushDenormals::new();
     let batch = cfg.batch_size.min(data.train.len());
     let val = Tensor::from_slice(&data.val.iter().map(|&r| r as i64).collect::<Vec<_>>()).to_device(dev);
     let (val_x, val_y) = (xs.index_select(0, &val), ys.index_select(0, &val));

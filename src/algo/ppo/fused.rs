@@ -9,8 +9,8 @@
 //! loss and every gradient against libtorch's autograd of the same loss.
 use std::collections::HashMap;
 
-use crate::nn::gemm::gemm;
-use crate::nn::vectorised;
+use crate::kernels::gemm::{Factor, Product, gemm};
+use crate::kernels::vectorised;
 use crate::nn::{Activation, ActorCritic};
 
 #[derive(Debug, Clone, Copy)]
@@ -135,7 +135,7 @@ impl Fused {
     }
 
     /// `acts[0] = x`, `acts[l + 1]` = output of layer l: each row starts from the bias and
-    /// adds `x W^T` through idrex's matrix product ([`crate::nn::gemm`]: the same bits on
+    /// adds `x W^T` through idrex's matrix product ([`crate::kernels::gemm`]: the same bits on
     /// every processor).
     fn forward(params: &[f32], layers: &[Layer], act: Activation, x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>) {
         acts.resize(layers.len() + 1, Vec::new());
@@ -148,7 +148,7 @@ impl Fused {
             let bias = &params[ly.b..ly.b + ly.out];
             y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
             let w = &params[ly.w..ly.w + ly.out * ly.inp];
-            gemm(false, true, b, ly.out, ly.inp, xin, ly.inp, w, ly.inp, 1.0, y, ly.out);
+            gemm(Product { m: b, n: ly.out, k: ly.inp, a: Factor::new(xin, ly.inp), b: Factor::t(w, ly.inp), accumulate: true }, y, ly.out);
             if l + 1 < layers.len() {
                 crate::nn::activate(y, act);
             }
@@ -172,10 +172,19 @@ impl Fused {
             for row in d.chunks_exact(ly.out) {
                 grads[ly.b..ly.b + ly.out].iter_mut().zip(row).for_each(|(g, v)| *g += v);
             }
-            gemm(true, false, ly.out, ly.inp, b, &d, ly.out, &acts[l], ly.inp, 1.0, &mut grads[ly.w..ly.w + ly.out * ly.inp], ly.inp);
+            let p = Product { m: ly.out, n: ly.inp, k: b, a: Factor::t(&d, ly.out), b: Factor::new(&acts[l], ly.inp), accumulate: true };
+            gemm(p, &mut grads[ly.w..ly.w + ly.out * ly.inp], ly.inp);
             if l > 0 {
                 let mut dx = vec![0.0f32; b * ly.inp];
-                gemm(false, false, b, ly.inp, ly.out, &d, ly.out, &params[ly.w..ly.w + ly.out * ly.inp], ly.inp, 0.0, &mut dx, ly.inp);
+                let p = Product {
+                    m: b,
+                    n: ly.inp,
+                    k: ly.out,
+                    a: Factor::new(&d, ly.out),
+                    b: Factor::new(&params[ly.w..ly.w + ly.out * ly.inp], ly.inp),
+                    accumulate: false,
+                };
+                gemm(p, &mut dx, ly.inp);
                 d = dx;
             }
         }

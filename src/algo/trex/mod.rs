@@ -13,8 +13,9 @@ use tch::nn;
 
 use crate::data::Trajectory;
 use crate::error::{Error, Result};
-use crate::nn::bf16::Precision;
-use crate::nn::dense::{Buf, Dense, Scratch};
+use crate::kernels::Buf;
+use crate::kernels::bf16::Precision;
+use crate::nn::dense::{Dense, Scratch};
 use crate::nn::trainer::{LANES, Trainer};
 use crate::nn::{Device, RewardConfig, RewardEnsemble, RewardNet, WeightInit};
 use crate::seed::{self, Purpose};

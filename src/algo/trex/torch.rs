@@ -100,7 +100,7 @@ pub(crate) fn train_torch(
     seed: u64,
     dev: tch::Device,
 ) -> Result<Vec<ModelReport>> {
-    let _ftz = crate::nn::FlushDenormals::new();
+    let _ftz = crate::kernels::FlushDenormals::new();
     let mut reports = Vec::with_capacity(model.nets.len());
     for m in 0..model.nets.len() {
         let (pairs, n_val, mut rng) = model_pairs(m, trajs, ranking, cfg, seed)?;

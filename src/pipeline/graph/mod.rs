@@ -379,8 +379,8 @@ mod tests {
         // The manifest's CPU path names the bf16 path of a bf16 reward only.
         let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}trex:\n  precision: bf16\n")).unwrap();
         let g = expand(&p).unwrap();
-        let kernel = crate::nn::gemm::Kernel::active().name();
-        let bf16 = crate::nn::bf16::Bf16Path::active().name();
+        let kernel = crate::kernels::gemm::Kernel::active().name();
+        let bf16 = crate::kernels::bf16::Bf16Path::active().name();
         assert_eq!(g.get("drex/trex").unwrap().params.cpu_path(), format!("{kernel}; bf16 {bf16}"));
         assert_eq!(g.get("bc").unwrap().params.cpu_path(), kernel);
     }

@@ -6,6 +6,7 @@
 //! checkpoint choice reads these), and for the final policy how well it ranks the episodes.
 use super::{REWARD, RolloutSummary, StageCtx, load_policy_for, read_rollouts};
 use crate::algo::ppo;
+use crate::algo::scoring::{CheckpointEval, learned_score, member_stats};
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::Result;
@@ -13,7 +14,6 @@ use crate::nn::{ActorCritic, RewardEnsemble};
 use crate::pipeline::config::Method;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
-use crate::algo::scoring::{CheckpointEval, learned_score, member_stats};
 use crate::stats::{nan_as_null, pairwise_accuracy, pearson, spearman};
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

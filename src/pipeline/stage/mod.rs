@@ -146,10 +146,10 @@ impl Params {
     /// every path gives the same bytes): the f32 kernel variant, and where the stage trains
     /// in bf16, the bf16 path.
     pub fn cpu_path(&self) -> String {
-        let kernel = crate::nn::gemm::Kernel::active().name();
+        let kernel = crate::kernels::gemm::Kernel::active().name();
         match self {
-            Params::Trex(p) if p.trex.precision == crate::nn::bf16::Precision::Bf16 => {
-                format!("{kernel}; bf16 {}", crate::nn::bf16::Bf16Path::active().name())
+            Params::Trex(p) if p.trex.precision == crate::kernels::bf16::Precision::Bf16 => {
+                format!("{kernel}; bf16 {}", crate::kernels::bf16::Bf16Path::active().name())
             }
             _ => kernel.to_string(),
         }

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use crate::algo::bc::{self, BcReport};
 use crate::algo::ppo;
+use crate::algo::scoring::Fidelity;
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
@@ -13,7 +14,6 @@ use crate::pipeline::config::{CloneConfig, CloneLabels, SourceActing};
 use crate::pipeline::stage::load_policy_for;
 use crate::rollout::{self, Actor, PolicyActor, UniformActor};
 use crate::seed::{self, Purpose};
-use crate::algo::scoring::Fidelity;
 
 /// One clone's record in the stage's metrics.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -12,8 +12,8 @@
 use std::path::Path;
 
 use super::clone::{self, CloneRecord};
-use crate::algo::scoring::{Fidelity, demo_scale, per_step_score, select};
 use crate::algo::noise;
+use crate::algo::scoring::{Fidelity, demo_scale, per_step_score, select};
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};

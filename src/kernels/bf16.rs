@@ -12,7 +12,7 @@
 //! with denormals flushed ([`Bf16Path::Emulated`]). `tests::native_matches_the_emulation`
 //! checks that the two agree bit for bit wherever both run; measured on an AMD Zen 5
 //! processor, the instruction computes exactly the odd-then-even chain the manuals give.
-use super::gemm::{Kernel, gemm_with};
+use super::gemm::{Factor, Kernel, Product, gemm_with};
 
 /// How a product's factors are stored for the multiply: the reward and policy networks
 /// train in either.
@@ -94,44 +94,15 @@ fn flush(x: f32) -> f32 {
     if x.is_subnormal() { 0.0f32.copysign(x) } else { x }
 }
 
-/// Row-major `C (m x n) = op(A) op(B) + beta C` in bf16 (the module's definition), the same
-/// signature as [`super::gemm::gemm`].
-#[allow(clippy::too_many_arguments)]
-pub fn gemm_bf16(
-    ta: bool,
-    tb: bool,
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    lda: usize,
-    b: &[f32],
-    ldb: usize,
-    beta: f32,
-    c: &mut [f32],
-    ldc: usize,
-) {
-    gemm_bf16_with(Bf16Path::active(), ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc)
+/// The product `p` into row-major `c` (rows `ldc` apart) in bf16 (the module's definition),
+/// as [`super::gemm::gemm`] does in f32.
+pub fn gemm_bf16(p: Product<'_>, c: &mut [f32], ldc: usize) {
+    gemm_bf16_with(Bf16Path::active(), p, c, ldc)
 }
 
 /// [`gemm_bf16`] on a chosen path (tests and benchmarks compare them).
-#[allow(clippy::too_many_arguments)]
-pub fn gemm_bf16_with(
-    path: Bf16Path,
-    ta: bool,
-    tb: bool,
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    lda: usize,
-    b: &[f32],
-    ldb: usize,
-    beta: f32,
-    c: &mut [f32],
-    ldc: usize,
-) {
-    assert!(beta == 0.0 || beta == 1.0, "gemm: beta is 0 or 1");
+pub fn gemm_bf16_with(path: Bf16Path, p: Product<'_>, c: &mut [f32], ldc: usize) {
+    let Product { m, n, k, a: Factor { data: a, ld: lda, transposed: ta }, b: Factor { data: b, ld: ldb, transposed: tb }, accumulate } = p;
     if m == 0 || n == 0 {
         return;
     }
@@ -144,7 +115,7 @@ pub fn gemm_bf16_with(
     let at = |i: usize, p: usize| a[i * ars + p * acs];
     let bt = |p: usize, j: usize| b[p * brs + j * bcs];
     assert!(ldc >= n && c.len() >= (m - 1) * ldc + n, "gemm: C is too short");
-    if beta == 1.0 {
+    if accumulate {
         // The instruction reads its accumulator as if denormals were zero.
         for i in 0..m {
             c[i * ldc..i * ldc + n].iter_mut().for_each(|v| *v = flush(*v));
@@ -171,7 +142,7 @@ pub fn gemm_bf16_with(
                     br[swapped(p) * n + j] = from_bf16(to_bf16(bt(p, j)));
                 }
             }
-            gemm_with(kernel, false, false, m, n, kp, &ar, kp, &br, n, beta, c, ldc);
+            gemm_with(kernel, Product { m, n, k: kp, a: Factor::new(&ar, kp), b: Factor::new(&br, n), accumulate }, c, ldc);
         }
         Bf16Path::Native => {
             assert!(Bf16Path::native_supported(), "gemm_bf16_with: this processor has no AVX512-BF16");
@@ -179,7 +150,7 @@ pub fn gemm_bf16_with(
             // SAFETY: the processor has the instructions (checked above); `native` reads the
             // packed copies and writes C inside the extents checked above.
             unsafe {
-                native::product(m, n, k, (a, ars, acs), (b, brs, bcs), beta == 1.0, c, ldc)
+                native::product(m, n, k, (a, ars, acs), (b, brs, bcs), accumulate, c, ldc)
             };
         }
     }
@@ -247,7 +218,12 @@ mod native {
                 for blk in 0..blocks {
                     // SAFETY: 8 runs of at least 8 x blk + 8 pairs; the panel holds kc rows of 8.
                     unsafe {
-                        crate::nn::gemm::x86::transpose8(runs[0][8 * blk..].as_ptr().cast(), KCP, dst[64 * blk..].as_mut_ptr().cast(), 8)
+                        crate::kernels::gemm::x86::transpose8(
+                            runs[0][8 * blk..].as_ptr().cast(),
+                            KCP,
+                            dst[64 * blk..].as_mut_ptr().cast(),
+                            8,
+                        )
                     };
                 }
                 for q in 8 * blocks..kc {
@@ -373,28 +349,16 @@ mod native {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::nn::gemm::test_values as values;
+    use crate::kernels::gemm::test_values as values;
 
     /// The definition, element by element.
-    #[allow(clippy::too_many_arguments)]
-    fn reference(
-        ta: bool,
-        tb: bool,
-        m: usize,
-        n: usize,
-        k: usize,
-        a: &[f32],
-        lda: usize,
-        b: &[f32],
-        ldb: usize,
-        beta: f32,
-        c: &mut [f32],
-        ldc: usize,
-    ) {
+    fn reference(p: Product<'_>, c: &mut [f32], ldc: usize) {
+        let Product { m, n, k, a: Factor { data: a, ld: lda, transposed: ta }, b: Factor { data: b, ld: ldb, transposed: tb }, accumulate } =
+            p;
         let r = |x: f32| from_bf16(to_bf16(x));
         for i in 0..m {
             for j in 0..n {
-                let mut acc = if beta == 1.0 { flush(c[i * ldc + j]) } else { 0.0 };
+                let mut acc = if accumulate { flush(c[i * ldc + j]) } else { 0.0 };
                 for q in 0..k.div_ceil(2) {
                     for p in [2 * q + 1, 2 * q] {
                         let (x, y) = if p < k {
@@ -420,7 +384,7 @@ mod tests {
 
     /// Every path this processor has gives the definition's bits (and so each other's), in
     /// every transpose, at odd k, at tile edges, across blocks of the summed dimension, for
-    /// both betas, with subnormal and tiny values among the inputs.
+    /// C written over and accumulated, with subnormal and tiny values among the inputs.
     #[test]
     fn native_matches_the_emulation() {
         let shapes = [(1, 1, 1), (5, 3, 4), (7, 17, 33), (64, 256, 17), (9, 40, 600), (33, 65, 257), (4, 4, 0)];
@@ -433,14 +397,27 @@ mod tests {
                 // Subnormal factors and accumulators, and products that cancel to tiny sums.
                 a.iter_mut().step_by(11).for_each(|v| *v *= 1e-39);
                 c0.iter_mut().step_by(7).for_each(|v| *v *= 1e-40);
-                for beta in [0.0, 1.0] {
+                for accumulate in [false, true] {
+                    let p = Product {
+                        m,
+                        n,
+                        k,
+                        a: Factor { data: &a, ld: lda, transposed: ta },
+                        b: Factor { data: &b, ld: ldb, transposed: tb },
+                        accumulate,
+                    };
                     let mut want = c0.clone();
-                    reference(ta, tb, m, n, k, &a, lda, &b, ldb, beta, &mut want, ldc);
+                    reference(p, &mut want, ldc);
                     for path in paths() {
                         let mut got = c0.clone();
-                        gemm_bf16_with(path, ta, tb, m, n, k, &a, lda, &b, ldb, beta, &mut got, ldc);
+                        gemm_bf16_with(path, p, &mut got, ldc);
                         let differ = (0..m * ldc).filter(|&e| e % ldc < n && got[e].to_bits() != want[e].to_bits()).count();
-                        assert_eq!(differ, 0, "{} {m}x{n}x{k} ta {ta} tb {tb} beta {beta}: {differ} elements differ", path.name());
+                        assert_eq!(
+                            differ,
+                            0,
+                            "{} {m}x{n}x{k} ta {ta} tb {tb} accumulate {accumulate}: {differ} elements differ",
+                            path.name()
+                        );
                     }
                 }
             }

@@ -1,5 +1,5 @@
 //! The x86-64 micro-kernels of [`super`] and the register transpose its packing (and
-//! `nn::bf16`'s) uses.
+//! `kernels::bf16`'s) uses.
 use std::arch::x86_64::*;
 
 /// Writes the 8 x 8 block whose column `j` starts at `src + j * stride` (8 contiguous
@@ -7,7 +7,7 @@ use std::arch::x86_64::*;
 /// holds element `p` of every column. Bit moves only, so it copies any 32-bit values
 /// exactly (bf16 pairs too).
 #[target_feature(enable = "avx")]
-pub(in crate::nn) unsafe fn transpose8(src: *const f32, stride: usize, dst: *mut f32, dst_stride: usize) {
+pub(in crate::kernels) unsafe fn transpose8(src: *const f32, stride: usize, dst: *mut f32, dst_stride: usize) {
     // SAFETY (all): the caller's extents.
     let r: [__m256; 8] = std::array::from_fn(|j| unsafe { _mm256_loadu_ps(src.add(j * stride)) });
     let t = [

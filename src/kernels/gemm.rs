@@ -2,8 +2,8 @@
 //! processor.
 //!
 //! Every output is one chain of fused multiply-adds over the summed dimension in index
-//! order, `c = fma(a[i][p], b[p][j], c)` for `p = 0, 1, ..., k-1`, started from `C` (beta 1)
-//! or from zero (beta 0). The kernels vectorise across outputs only, never across the summed
+//! order, `c = fma(a[i][p], b[p][j], c)` for `p = 0, 1, ..., k-1`, started from `C` (accumulating)
+//! or from zero. The kernels vectorise across outputs only, never across the summed
 //! dimension, and block that dimension into consecutive runs that continue the same chain,
 //! so neither the vector width, the tile shape, the block sizes nor the orientation (a
 //! product may be computed transposed, which swaps the two factors of each multiply, and
@@ -121,25 +121,43 @@ impl ViewMut {
     }
 }
 
-/// Row-major `C (m x n) = op(A) op(B) + beta C` with `beta` 0 or 1, `op` a transpose where
-/// asked, leading dimensions `lda`, `ldb`, `ldc` (elements between rows). Same signature as
-/// the BLAS call it replaced; see the module documentation for the order of the sums.
-#[allow(clippy::too_many_arguments)]
-pub fn gemm(
-    ta: bool,
-    tb: bool,
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    lda: usize,
-    b: &[f32],
-    ldb: usize,
-    beta: f32,
-    c: &mut [f32],
-    ldc: usize,
-) {
-    gemm_with(Kernel::active(), ta, tb, m, n, k, a, lda, b, ldb, beta, c, ldc)
+/// One factor of a product: row-major `data` with `ld` elements between rows (BLAS's
+/// leading dimension), read transposed where `transposed`.
+#[derive(Debug, Clone, Copy)]
+pub struct Factor<'a> {
+    pub data: &'a [f32],
+    pub ld: usize,
+    pub transposed: bool,
+}
+
+impl<'a> Factor<'a> {
+    /// `data` as stored, rows `ld` apart.
+    pub fn new(data: &'a [f32], ld: usize) -> Self {
+        Factor { data, ld, transposed: false }
+    }
+
+    /// `data` transposed, its stored rows `ld` apart.
+    pub fn t(data: &'a [f32], ld: usize) -> Self {
+        Factor { data, ld, transposed: true }
+    }
+}
+
+/// A matrix product `C (m x n) = op(A) op(B)`, op(A) `m x k` and op(B) `k x n`: written over
+/// C, or added to it where `accumulate` (BLAS's beta, which here could only be 0 or 1).
+#[derive(Debug, Clone, Copy)]
+pub struct Product<'a> {
+    pub m: usize,
+    pub n: usize,
+    pub k: usize,
+    pub a: Factor<'a>,
+    pub b: Factor<'a>,
+    pub accumulate: bool,
+}
+
+/// The product `p` into row-major `c`, rows `ldc` apart; see the module documentation for
+/// the order of the sums.
+pub fn gemm(p: Product<'_>, c: &mut [f32], ldc: usize) {
+    gemm_with(Kernel::active(), p, c, ldc)
 }
 
 /// The summed dimension is computed in consecutive blocks of this many terms, each
@@ -180,7 +198,7 @@ unsafe fn product(kernel: Kernel, m: usize, n: usize, k: usize, a: View, b: View
             let edge = nc - nc % nr;
             for pc in (0..k.max(1)).step_by(KC) {
                 let kc = KC.min(k - pc);
-                // Beta 0 starts from zero; every later block (and beta 1) continues from C.
+                // A fresh product starts from zero; every later block (and accumulation) continues from C.
                 let load = accumulate || pc > 0;
                 // SAFETY: the blocks lie inside A, B and C (the extents `gemm` checked).
                 unsafe {
@@ -348,24 +366,9 @@ unsafe fn scalar(kc: usize, a: *const f32, b: *const f32, ldb: usize, c: *mut f3
 pub(super) mod x86;
 
 /// [`gemm`] on a chosen variant (tests and benchmarks compare them).
-#[allow(clippy::too_many_arguments)]
-pub fn gemm_with(
-    kernel: Kernel,
-    ta: bool,
-    tb: bool,
-    m: usize,
-    n: usize,
-    k: usize,
-    a: &[f32],
-    lda: usize,
-    b: &[f32],
-    ldb: usize,
-    beta: f32,
-    c: &mut [f32],
-    ldc: usize,
-) {
+pub fn gemm_with(kernel: Kernel, p: Product<'_>, c: &mut [f32], ldc: usize) {
+    let Product { m, n, k, a: Factor { data: a, ld: lda, transposed: ta }, b: Factor { data: b, ld: ldb, transposed: tb }, accumulate } = p;
     assert!(kernel.supported(), "gemm_with: this processor cannot run {}", kernel.name());
-    assert!(beta == 0.0 || beta == 1.0, "gemm: beta is 0 or 1");
     if m == 0 || n == 0 {
         return;
     }
@@ -379,7 +382,7 @@ pub fn gemm_with(
     let bv = if tb { View { ptr: b.as_ptr(), rs: 1, cs: ldb } } else { View { ptr: b.as_ptr(), rs: ldb, cs: 1 } };
     let cv = ViewMut { ptr: c.as_mut_ptr(), rs: ldc, cs: 1 };
     // SAFETY: every element the product touches lies inside the extents checked above.
-    unsafe { product(kernel, m, n, k, av, bv, cv, beta == 1.0) }
+    unsafe { product(kernel, m, n, k, av, bv, cv, accumulate) }
 }
 
 /// Test operands of varied sign and magnitude (the products' tests share them).
@@ -394,24 +397,12 @@ mod tests {
     use super::*;
 
     /// The specification, element by element: one `mul_add` chain over the summed dimension.
-    #[allow(clippy::too_many_arguments)]
-    fn reference(
-        ta: bool,
-        tb: bool,
-        m: usize,
-        n: usize,
-        k: usize,
-        a: &[f32],
-        lda: usize,
-        b: &[f32],
-        ldb: usize,
-        beta: f32,
-        c: &mut [f32],
-        ldc: usize,
-    ) {
+    fn reference(p: Product<'_>, c: &mut [f32], ldc: usize) {
+        let Product { m, n, k, a: Factor { data: a, ld: lda, transposed: ta }, b: Factor { data: b, ld: ldb, transposed: tb }, accumulate } =
+            p;
         for i in 0..m {
             for j in 0..n {
-                let mut acc = if beta == 1.0 { c[i * ldc + j] } else { 0.0 };
+                let mut acc = if accumulate { c[i * ldc + j] } else { 0.0 };
                 for p in 0..k {
                     let x = if ta { a[p * lda + i] } else { a[i * lda + p] };
                     let y = if tb { b[j * ldb + p] } else { b[p * ldb + j] };
@@ -423,7 +414,7 @@ mod tests {
     }
 
     /// Every variant this processor has gives the reference's bits, in every transpose, at
-    /// edges, across blocks of the summed dimension and of rows and columns, for both betas.
+    /// edges, across blocks of the summed dimension and of rows and columns, written over C and accumulated.
     #[test]
     fn variants_agree_bit_for_bit() {
         let shapes = [
@@ -446,14 +437,27 @@ mod tests {
                 let a = values(if ta { k * lda } else { m * lda }, 0.37);
                 let b = values(if tb { n * ldb } else { k * ldb }, 0.91);
                 let c0 = values(m * ldc, 0.13);
-                for beta in [0.0, 1.0] {
+                for accumulate in [false, true] {
+                    let p = Product {
+                        m,
+                        n,
+                        k,
+                        a: Factor { data: &a, ld: lda, transposed: ta },
+                        b: Factor { data: &b, ld: ldb, transposed: tb },
+                        accumulate,
+                    };
                     let mut want = c0.clone();
-                    reference(ta, tb, m, n, k, &a, lda, &b, ldb, beta, &mut want, ldc);
+                    reference(p, &mut want, ldc);
                     for &kernel in &kernels {
                         let mut got = c0.clone();
-                        gemm_with(kernel, ta, tb, m, n, k, &a, lda, &b, ldb, beta, &mut got, ldc);
+                        gemm_with(kernel, p, &mut got, ldc);
                         let differ = got.iter().zip(&want).filter(|(g, w)| g.to_bits() != w.to_bits()).count();
-                        assert_eq!(differ, 0, "{} {m}x{n}x{k} ta {ta} tb {tb} beta {beta}: {differ} elements differ", kernel.name());
+                        assert_eq!(
+                            differ,
+                            0,
+                            "{} {m}x{n}x{k} ta {ta} tb {tb} accumulate {accumulate}: {differ} elements differ",
+                            kernel.name()
+                        );
                     }
                 }
             }
