@@ -198,3 +198,34 @@ fn the_stage_table_gives_each_kind_its_version() {
         StageKind::ALL.iter().filter(|k| **k != StageKind::TestValue).map(|k| (k.name().to_string(), k.version())).collect();
     assert_eq!(table, code, "src/pipeline/stage/mod.rs's table against StageKind::version");
 }
+
+/// `analysis/` commits each figure once (as SVG; `idrex report --figures svg` writes only
+/// that), and every relative link of its pages resolves.
+#[test]
+fn analysis_commits_each_figure_once_and_its_links_resolve() {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().flatten() {
+            let p = e.path();
+            // Installed packages (the Foxglove reader's node_modules) are not ours.
+            if p.is_dir() && !p.ends_with("node_modules") {
+                walk(&p, out);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(&repo("analysis"), &mut files);
+    let twins: Vec<&PathBuf> =
+        files.iter().filter(|p| p.extension().is_some_and(|e| e == "png") && p.with_extension("svg").exists()).collect();
+    assert!(twins.is_empty(), "figures committed as both PNG and SVG: {twins:?}");
+    let mut checked = 0;
+    for page in files.iter().filter(|p| p.extension().is_some_and(|e| e == "md")) {
+        let text = std::fs::read_to_string(page).unwrap();
+        for target in links(&text) {
+            assert!(page.parent().unwrap().join(&target).exists(), "{}: the link {target} goes nowhere", page.display());
+            checked += 1;
+        }
+    }
+    assert!(checked >= 100, "{checked} links");
+}

@@ -24,6 +24,9 @@ pub struct ReportArgs {
     /// (`comparisons.csv`); repeatable.
     #[arg(long, value_name = "STUDY:BASELINE")]
     pub compare: Vec<String>,
+    /// The figures' files (`svg` for what is committed: half the size, and it scales).
+    #[arg(long, value_enum, default_value_t = crate::report::figures::FigureFormats::Both)]
+    pub figures: crate::report::figures::FigureFormats,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -70,13 +73,13 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
             crate::report::write_csv(&mut crate::report::clones::frame(&t.clones)?, &args.out.join("clones.csv"))?;
         }
     }
-    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"))?;
+    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"), args.figures)?;
     let notes = crate::report::notes(&store)?;
     let md = format!(
         "{}{}{notes}{}",
         crate::report::markdown(&t),
         crate::report::comparisons::comparison_markdown(&comparisons),
-        crate::report::figures::markdown(&figures, "figures")
+        crate::report::figures::markdown(&figures, "figures", args.figures)
     );
     if args.format != ReportFormat::Csv {
         std::fs::write(args.out.join("report.md"), &md)?;

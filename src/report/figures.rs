@@ -35,7 +35,25 @@ use runs::{Curve, Degradation, FinalBars, PpoCurves, RewardScatter, Runs};
 const SIZE: (u32, u32) = (960, 640);
 const FONT: &str = "sans-serif";
 
-/// A figure written as `<stem>.svg` and `<stem>.png`.
+/// Which files a figure is written as: `<stem>.svg`, `<stem>.png` or both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum FigureFormats {
+    Svg,
+    Png,
+    #[default]
+    Both,
+}
+
+impl FigureFormats {
+    fn svg(self) -> bool {
+        self != FigureFormats::Png
+    }
+    fn png(self) -> bool {
+        self != FigureFormats::Svg
+    }
+}
+
+/// A figure written as `<stem>.svg` and/or `<stem>.png`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Written {
     pub env: String,
@@ -64,17 +82,20 @@ fn e2s<E: std::fmt::Debug>(e: E) -> String {
     format!("{e:?}")
 }
 
-fn save(fig: &impl Figure, dir: &Path, stem: &str) -> Result<()> {
+fn save(fig: &impl Figure, dir: &Path, stem: &str, formats: FigureFormats) -> Result<()> {
     fonts();
     let svg = dir.join(format!("{stem}.svg"));
     let fail = |path: &Path, e: String| Error::file(path, format!("cannot draw the figure: {e}"));
-    {
+    if formats.svg() {
         let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
         root.fill(&WHITE)
             .map_err(e2s)
             .and_then(|_| fig.draw(&root))
             .and_then(|_| root.present().map_err(e2s))
             .map_err(|e| fail(&svg, e))?;
+    }
+    if !formats.png() {
+        return Ok(());
     }
     let png = dir.join(format!("{stem}.png"));
     let mut pixels = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
@@ -179,6 +200,7 @@ pub fn write(
     aggregate: &[AggregateRow],
     clone_rows: &[super::clones::CloneRow],
     dir: &Path,
+    formats: FigureFormats,
 ) -> Result<Vec<Written>> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
     for m in store.iter() {
@@ -235,7 +257,7 @@ pub fn write(
         let curves: Vec<Curve> = g.sets.values().map(|(node, levels)| Curve { source: node.clone(), levels: levels.clone() }).collect();
         if !curves.is_empty() {
             let fig = Degradation { env: env.clone(), pipeline: pipeline.clone(), curves, demos: g.demos };
-            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "degradation")?;
+            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "degradation")?;
         }
         for (method, reward) in &g.rewards {
             let Some((_, Typed { metrics: Metrics::Trex(t), .. })) = typed(store, reward) else { continue };
@@ -250,23 +272,23 @@ pub fn write(
                     ("unseen evaluation rollouts", g.unseen.get(method).cloned().unwrap_or_default()),
                 ],
             };
-            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), &format!("reward-{}", method.name()))?;
+            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), &format!("reward-{}", method.name()))?;
         }
         if !g.runs.is_empty() {
             g.runs.sort_by_key(|r| (r.0, r.1));
             let fig = PpoCurves { env: env.clone(), pipeline: pipeline.clone(), runs: std::mem::take(&mut g.runs), demos: g.demos };
-            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "ppo")?;
+            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "ppo")?;
         }
         let rows: Vec<_> = clone_rows.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
         if !rows.is_empty() {
             let random = rows.iter().find_map(|r| store_random(store, &r.node));
             let fig = clones::CloneScatter { env: env.clone(), pipeline: pipeline.clone(), rows, random };
-            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "clones")?;
+            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "clones")?;
         }
         let rows: Vec<ProtocolRow> = protocols.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
         if !rows.is_empty() {
             let fig = FinalBars { env: env.clone(), pipeline: pipeline.clone(), rows, demos: g.demos.map(|d| d.0) };
-            emit(&|d, s| save(&fig, d, s).map(|_| fig.title()), "final")?;
+            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "final")?;
         }
     }
     let mut studies: Vec<(&str, &str)> = aggregate.iter().map(|a| (a.env.as_str(), a.study.as_str())).collect();
@@ -281,17 +303,18 @@ pub fn write(
         let label = format!("study {study}");
         let rows: Vec<AggregateRow> = aggregate.iter().filter(|a| a.env == env && a.study == study).cloned().collect();
         let fig = studies::Intervals { env: env.into(), study: study.into(), rows, demos };
-        save(&fig, dir, &format!("{slug}-intervals"))?;
+        save(&fig, dir, &format!("{slug}-intervals"), formats)?;
         written.push(Written { env: env.into(), pipeline: label.clone(), stem: format!("{slug}-intervals"), title: fig.title() });
         let fig = studies::Profile::of(env, study, protocols, demos);
-        save(&fig, dir, &format!("{slug}-profile"))?;
+        save(&fig, dir, &format!("{slug}-profile"), formats)?;
         written.push(Written { env: env.into(), pipeline: label, stem: format!("{slug}-profile"), title: fig.title() });
     }
     Ok(written)
 }
 
-/// The markdown section linking every figure (PNG, with the SVG beside it).
-pub fn markdown(written: &[Written], dir_name: &str) -> String {
+/// The markdown section linking every figure (the PNG with the SVG beside it, or the one
+/// format written).
+pub fn markdown(written: &[Written], dir_name: &str, formats: FigureFormats) -> String {
     let mut out = String::from("\n## Figures\n");
     let mut last: Option<(&str, &str)> = None;
     for w in written {
@@ -301,7 +324,11 @@ pub fn markdown(written: &[Written], dir_name: &str) -> String {
         }
         let png = PathBuf::from(dir_name).join(format!("{}.png", w.stem));
         let svg = PathBuf::from(dir_name).join(format!("{}.svg", w.stem));
-        out.push_str(&format!("\n{} ([SVG]({}))\n\n![{}]({})\n", w.title, svg.display(), w.title, png.display()));
+        match formats {
+            FigureFormats::Both => out.push_str(&format!("\n{} ([SVG]({}))\n\n![{}]({})\n", w.title, svg.display(), w.title, png.display())),
+            FigureFormats::Svg => out.push_str(&format!("\n{}\n\n![{}]({})\n", w.title, w.title, svg.display())),
+            FigureFormats::Png => out.push_str(&format!("\n{}\n\n![{}]({})\n", w.title, w.title, png.display())),
+        }
     }
     out
 }
