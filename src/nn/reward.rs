@@ -113,6 +113,15 @@ pub struct Composition {
     pub ceiling: Option<f64>,
 }
 
+impl Composition {
+    /// Whether PPO reads D-REX's ranked set (a `floor` input) to compose this reward: the
+    /// ranked floor and the ceiling are measured on it. The graph wires the input and the
+    /// PPO stage reads it by this one rule.
+    pub fn needs_ranked_set(&self) -> bool {
+        !self.level.is_running() || self.ceiling.is_some()
+    }
+}
+
 fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }

@@ -119,7 +119,7 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .enumerate()
         .map(|(r, &seed)| {
             let mut inputs = vec![io("reward", reward)];
-            if !p.composition.level.is_running() || p.composition.ceiling.is_some() {
+            if p.composition.needs_ranked_set() {
                 // D-REX's ranked set, the reward's first: where the ranked floor and the
                 // ceiling are measured.
                 let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| role == "set0")).map(|(_, n)| n.clone());

@@ -49,7 +49,7 @@ pub const CURVE: &str = "curve.csv";
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
     let mut reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
-    if p.reward.level == RewardLevel::RankedFloor || p.reward.ceiling.is_some() {
+    if p.reward.needs_ranked_set() {
         let set = super::read_rollouts(ctx.input("floor")?)?;
         if p.reward.level == RewardLevel::RankedFloor {
             reward.fix_levels_from(&set)?;
