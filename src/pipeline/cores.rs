@@ -90,7 +90,7 @@ fn own_ns() -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::stage::{self, Params, test_value};
+    use crate::pipeline::stage::{self, Params};
 
     #[test]
     fn cores_go_one_per_stage_then_to_the_stages_that_use_more() {
@@ -102,7 +102,7 @@ mod tests {
         };
         let t = Node {
             name: "t".into(),
-            params: Params::TestValue(test_value::Params { value: 1, sleep_ms: 0, fail: false }),
+            params: Params::Demos(stage::demos::DemosParams { env: crate::env::EnvId::Hopper, episodes: 1 }),
             seed: 0,
             inputs: Default::default(),
         };

@@ -32,7 +32,6 @@ kinds! {
     InterpolationRollouts = "interpolation-rollouts",
     ActionNoiseRollouts = "action-noise-rollouts",
     MultiBcRollouts = "multi-bc-rollouts",
-    TestValue = "test-value",
 }
 
 impl StageKind {

@@ -15,6 +15,7 @@ pub mod kind;
 pub mod load;
 pub mod plots;
 pub mod recompute;
+pub mod role;
 pub mod runner;
 pub mod schedule;
 pub mod slurm;

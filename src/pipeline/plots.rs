@@ -181,14 +181,14 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
                 }
                 // Unseen rollouts scored by the reward this run trained on.
                 if let Some(acc) = &x.reward
-                    && let Some((_, src)) = n.inputs.iter().find(|(role, _)| role == "reward")
+                    && let Some((_, src)) = n.inputs.iter().find(|(role, _)| *role == crate::pipeline::role::Role::Reward)
                 {
                     let entry = unseen.entry(entity(src)).or_insert_with(|| (src.clone(), vec![], vec![]));
                     entry.1.extend(&x.summary.returns);
                     entry.2.extend(&acc.predicted_returns);
                 }
             }
-            Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) | Metrics::TestValue(_) => {}
+            Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) => {}
         }
     }
     for (e, (src, truth, predicted)) in unseen {

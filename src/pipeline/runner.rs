@@ -10,6 +10,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::Value;
 
 use super::graph::{Graph, Node};
+use super::role::Role;
 use super::stage::StageCtx;
 use crate::error::{Error, Result};
 use crate::store::{Manifest, Store, TestSetMark, now_unix};
@@ -98,7 +99,14 @@ fn run_node(
         // A forced node is computed to the side; the stored artifact stays until the new one
         // replaces it.
         // An S3 store's inputs are downloaded into its local cache (and checked) first.
-        let input_dirs = inputs.iter().map(|(role, k)| Ok((role.clone(), store.input_dir(k)?))).collect::<Result<_>>()?;
+        let input_dirs = inputs
+            .iter()
+            .map(|(name, k)| {
+                let role =
+                    Role::parse(name).ok_or_else(|| Error::Invalid(format!("{}: no stage reads an input as '{name}'", node.name)))?;
+                Ok((role, store.input_dir(k)?))
+            })
+            .collect::<Result<_>>()?;
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();
@@ -239,7 +247,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                 running.insert(n.name.clone(), threads);
                 since.insert(n.name.clone(), Instant::now());
                 let key = keys[&n.name].clone();
-                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
+                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), keys[src].clone())).collect();
                 let forced = opts.force.contains(&n.name);
                 let bar = multi.insert_before(&overall, ProgressBar::new(0));
                 bar.set_style(stage_style.clone());
@@ -302,19 +310,34 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::stage::{self, Params, test_value};
+    use crate::pipeline::role::Series;
+    use crate::pipeline::stage::{Params, demos::DemosParams};
 
+    /// A test stage, run by [`body`] instead of a stage kind's code: it writes its value plus
+    /// its inputs' values (read as a series of sets). A kind's parameters carry it (`episodes` is the value, so that it
+    /// is in the key), and its seed says how long it sleeps and whether it fails.
     fn node(name: &str, value: i64, inputs: &[&str], sleep_ms: u64, fail: bool) -> Node {
         Node {
             name: name.into(),
-            params: Params::TestValue(test_value::Params { value, sleep_ms, fail }),
-            seed: 0,
-            inputs: inputs.iter().enumerate().map(|(i, s)| (format!("in{i}"), s.to_string())).collect(),
+            params: Params::Demos(DemosParams { env: crate::env::EnvId::Hopper, episodes: value as usize }),
+            seed: 2 * sleep_ms + fail as u64,
+            inputs: inputs.iter().enumerate().map(|(i, s)| (Series::Set.at(i), s.to_string())).collect(),
         }
     }
 
     fn body(n: &Node, ctx: &StageCtx) -> Result<Value> {
-        stage::run(&n.params, ctx).map(|m| m.to_json())
+        let Params::Demos(p) = &n.params else { unreachable!("test nodes carry demos parameters") };
+        std::thread::sleep(std::time::Duration::from_millis(n.seed / 2));
+        if n.seed % 2 == 1 {
+            return Err(Error::Invalid("this test stage was asked to fail".into()));
+        }
+        let mut v = p.episodes as i64;
+        for dir in ctx.numbered(Series::Set) {
+            let path = dir.join("value.txt");
+            v += std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?.trim().parse::<i64>().unwrap();
+        }
+        std::fs::write(ctx.out.join("value.txt"), v.to_string()).map_err(|e| Error::io(ctx.out, e))?;
+        Ok(serde_json::json!({ "value": v }))
     }
 
     fn opts(force: &[&str]) -> RunOptions {

@@ -27,7 +27,7 @@ fn work(params: &Params) -> f64 {
         Params::ActionNoiseRollouts(p) => p.sigmas.len() * p.rollouts_per_level,
         Params::Eval(p) => p.episodes,
         Params::Demos(p) => p.episodes,
-        Params::DemosImport(_) | Params::TestValue(_) => 1,
+        Params::DemosImport(_) => 1,
     };
     n.max(1) as f64
 }
@@ -44,7 +44,7 @@ fn reference_rate(kind: StageKind) -> f64 {
         // 26 checkpoints of 20 episodes each.
         StageKind::Eval => 12.0 / 20.0,
         StageKind::Demos => 0.5,
-        StageKind::DemosImport | StageKind::TestValue => 0.01,
+        StageKind::DemosImport => 0.01,
     }
 }
 

@@ -292,7 +292,7 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
                     // An abandoned held job would otherwise sit in the queue forever.
                     let _ = Command::new("scancel").arg(job).output();
                 }
-                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
+                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), keys[src].clone())).collect();
                 store.put_def(&NodeDef {
                     key: key.clone(),
                     node: n.name.clone(),

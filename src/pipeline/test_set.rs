@@ -8,6 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::config::Role;
 use super::graph::Graph;
+use super::role::Role as Input;
 use super::stage::{Params, StageKind};
 use super::{Method, Pipeline};
 use crate::env::EnvId;
@@ -39,7 +40,7 @@ impl Look {
             seed: m.seed,
             method: p.method,
             iteration: p.iteration,
-            policy: m.inputs.get("policy")?.clone(),
+            policy: m.inputs.get(&Input::Policy.name())?.clone(),
             study: p.pipeline,
             mark: m.test_set.clone(),
         })
@@ -100,7 +101,7 @@ pub fn check(p: &Pipeline, g: &Graph, looks: &Looks, stored: &dyn Fn(&str) -> bo
     // (env, seed) -> the policies this run evaluates there, and whether it computes any.
     let mut mine: BTreeMap<(EnvId, u64), (BTreeSet<&str>, bool)> = BTreeMap::new();
     for n in &g.nodes {
-        let (Params::Eval(e), Some((_, policy))) = (&n.params, n.inputs.iter().find(|(role, _)| role == "policy")) else { continue };
+        let (Params::Eval(e), Some((_, policy))) = (&n.params, n.inputs.iter().find(|(role, _)| *role == Input::Policy)) else { continue };
         let at = mine.entry((e.env, n.seed)).or_default();
         at.0.insert(keys[policy].as_str());
         at.1 |= !stored(&keys[&n.name]);
@@ -158,7 +159,7 @@ mod tests {
                 node: n.name.clone(),
                 params: n.params.to_json(),
                 seed: n.seed,
-                inputs: n.inputs.iter().map(|(r, s)| (r.clone(), keys[s].clone())).collect(),
+                inputs: n.inputs.iter().map(|(r, s)| (r.name(), keys[s].clone())).collect(),
                 outputs: vec![],
                 metrics: serde_json::json!({}),
                 started_unix: 0.0,

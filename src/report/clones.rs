@@ -9,6 +9,7 @@ use polars::prelude::*;
 use super::{Artifacts, pe};
 use crate::error::Result;
 use crate::pipeline::Method;
+use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::idrex::clone::CloneRecord;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 
@@ -48,10 +49,10 @@ pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
         if p.method != Method::IdrexMultiBc {
             continue;
         }
-        let Some(rm) = m.inputs.get("reward").and_then(|k| store.get(k)) else { continue };
+        let Some(rm) = m.inputs.get(&Role::Reward.name()).and_then(|k| store.get(k)) else { continue };
         for (role, key) in &rm.inputs {
             let Some(sm) = store.get(key) else { continue };
-            if !role.starts_with("set") || !seen.insert((p.table(), key.clone())) {
+            if !Role::named_in(role, Series::Set) || !seen.insert((p.table(), key.clone())) {
                 continue;
             }
             let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm) else { continue };

@@ -27,6 +27,7 @@ use super::studies::AggregateRow;
 use super::{Protocol, ProtocolRow};
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
+use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::{DegradationLevel, Metrics, Params, Typed};
 use crate::stats::pearson;
 use crate::store::Manifest;
@@ -211,7 +212,7 @@ pub fn write(
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         if g.demos.is_none()
             && let Some((_, Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. })) =
-                m.inputs.get("demos").and_then(|k| typed(store, k))
+                m.inputs.get(&Role::Demos.name()).and_then(|k| typed(store, k))
         {
             g.demos = Some((d.stats.mean, d.stats.std));
         }
@@ -223,7 +224,7 @@ pub fn write(
                 .collect();
             g.runs.push((p.method, p.run, points));
         }
-        let Some(reward) = m.inputs.get("reward") else { continue };
+        let Some(reward) = m.inputs.get(&Role::Reward.name()) else { continue };
         if let Some(acc) = &x.reward {
             g.unseen.entry(p.method).or_default().extend(x.summary.returns.iter().copied().zip(acc.predicted_returns.iter().copied()));
         }
@@ -233,7 +234,7 @@ pub fn write(
         g.rewards.insert(p.method, reward.clone());
         if let Some((rm, _)) = typed(store, reward) {
             for (role, key) in &rm.inputs {
-                if role.starts_with("set")
+                if Role::named_in(role, Series::Set)
                     && !g.sets.contains_key(key)
                     && let Some((sm, st)) = typed(store, key)
                     && let Some(levels) = degradation_of(&st.metrics)
@@ -325,7 +326,9 @@ pub fn markdown(written: &[Written], dir_name: &str, formats: FigureFormats) -> 
         let png = PathBuf::from(dir_name).join(format!("{}.png", w.stem));
         let svg = PathBuf::from(dir_name).join(format!("{}.svg", w.stem));
         match formats {
-            FigureFormats::Both => out.push_str(&format!("\n{} ([SVG]({}))\n\n![{}]({})\n", w.title, svg.display(), w.title, png.display())),
+            FigureFormats::Both => {
+                out.push_str(&format!("\n{} ([SVG]({}))\n\n![{}]({})\n", w.title, svg.display(), w.title, png.display()))
+            }
             FigureFormats::Svg => out.push_str(&format!("\n{}\n\n![{}]({})\n", w.title, w.title, svg.display())),
             FigureFormats::Png => out.push_str(&format!("\n{}\n\n![{}]({})\n", w.title, w.title, png.display())),
         }

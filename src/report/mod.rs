@@ -27,6 +27,7 @@ use crate::stats::spearman;
 use crate::store::{Manifest, Store};
 
 pub use crate::algo::scoring::{Selection, select};
+use crate::pipeline::role::Role;
 pub use notes::notes;
 use protocols::RESAMPLES;
 pub use protocols::{Protocol, ProtocolRow, protocols_frame};
@@ -152,7 +153,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
             a_over_checkpoints.push(over_checkpoints(&x.checkpoints));
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
-        if let Some(dk) = m.inputs.get("demos")
+        if let Some(dk) = m.inputs.get(&Role::Demos.name())
             && demo_keys.insert((e.clone(), table.label.clone(), dk.clone()))
             && let Some(dm) = store.get(dk)
             && let Ok(Typed { params, metrics: Metrics::Demos(d) | Metrics::DemosImport(d) }) = Typed::of(dm)

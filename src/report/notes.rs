@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use super::Artifacts;
 use crate::error::Result;
+use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::{Metrics, Params, Typed};
 
 /// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
@@ -14,7 +15,7 @@ pub fn notes(store: &Artifacts) -> Result<String> {
     let mut seen = std::collections::BTreeSet::new();
     for m in store.iter() {
         let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
-        let Some(reward) = m.inputs.get("reward") else { continue };
+        let Some(reward) = m.inputs.get(&Role::Reward.name()) else { continue };
         if !seen.insert((p.pipeline.clone(), reward.clone())) {
             continue;
         }
@@ -30,7 +31,7 @@ pub fn notes(store: &Artifacts) -> Result<String> {
             ));
         }
         for (role, key) in &rm.inputs {
-            if let (true, Some(sm)) = (role.starts_with("set"), store.get(key))
+            if let (true, Some(sm)) = (Role::named_in(role, Series::Set), store.get(key))
                 && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
             {
                 let kept = x.kept();

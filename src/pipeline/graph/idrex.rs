@@ -7,6 +7,7 @@
 use super::{Graph, io, rl_runs, trex_params};
 use crate::pipeline::Pipeline;
 use crate::pipeline::config::{CloneFilter, CloneSource, Method};
+use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::idrex::{action_noise, interpolation, multi_bc};
 use crate::pipeline::stage::{Params, trex::RankedSet};
 
@@ -60,10 +61,10 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
     let mut prev_reward = drex.trex.to_string();
     for k in 1..s.iterations {
         let prefix = format!("{}/k{k}", m.name());
-        let mut inputs: Vec<(String, String)> = current.iter().enumerate().map(|(r, n)| io(&format!("policy{r}"), n)).collect();
+        let mut inputs: Vec<(Role, String)> = current.iter().enumerate().map(|(r, n)| io(Series::Policy.at(r), n)).collect();
         let params = match variant {
             Variant::Interpolation => {
-                inputs.extend(previous.iter().enumerate().map(|(r, n)| io(&format!("older{r}"), n)));
+                inputs.extend(previous.iter().enumerate().map(|(r, n)| io(Series::Older.at(r), n)));
                 Params::InterpolationRollouts(interpolation::Params {
                     env,
                     alphas: s.idrex.alphas.clone(),
@@ -80,20 +81,20 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                 let filter = s.idrex.multi_bc_filter;
                 // Every earlier set, newest last: the filter compares with the newest that
                 // kept rollouts.
-                inputs.extend(sets.iter().enumerate().map(|(i, (n, _))| io(&format!("baseline{i}"), n)));
+                inputs.extend(sets.iter().enumerate().map(|(i, (n, _))| io(Series::Baseline.at(i), n)));
                 // The previous reward and the demonstrations always: the stage records what the
                 // previous-reward filter would decide, whichever filter runs.
-                inputs.push(io("reward", &prev_reward));
-                inputs.push(io("demos", drex.demos));
+                inputs.push(io(Role::Reward, &prev_reward));
+                inputs.push(io(Role::Demos, drex.demos));
                 if filter == CloneFilter::HeldOutReward {
                     let reward = g.get(&prev_reward).expect("the previous reward is in the graph").clone();
                     // An offset, not a hash: replicate r's seeds stay the replicate's shift of
                     // replicate 0's ([`crate::pipeline::config::replicate_seed`]).
                     let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
-                    inputs.push(io("judge", &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
+                    inputs.push(io(Role::Judge, &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
                 }
                 if s.idrex.multi_bc.source == CloneSource::Checkpoint {
-                    inputs.extend(current.iter().enumerate().map(|(r, n)| io(&format!("eval{r}"), &eval_of(n))));
+                    inputs.extend(current.iter().enumerate().map(|(r, n)| io(Series::Eval.at(r), &eval_of(n))));
                 }
                 Params::MultiBcRollouts(multi_bc::Params {
                     env,
@@ -107,8 +108,8 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
         };
         let rollouts = g.push(format!("{prefix}/rollouts"), params, s.seeds[0], inputs);
         sets.push((rollouts, RankedSet { level: k, same_group: variant == Variant::MultiBc }));
-        let mut trex_inputs: Vec<(String, String)> = sets.iter().enumerate().map(|(i, (n, _))| io(&format!("set{i}"), n)).collect();
-        trex_inputs.push(io("demos", drex.demos));
+        let mut trex_inputs: Vec<(Role, String)> = sets.iter().enumerate().map(|(i, (n, _))| io(Series::Set.at(i), n)).collect();
+        trex_inputs.push(io(Role::Demos, drex.demos));
         let ranked: Vec<RankedSet> = sets.iter().map(|(_, r)| *r).collect();
         let trex = g.push(format!("{prefix}/trex"), trex_params(p, m, ranked, variant == Variant::Interpolation), s.seeds[0], trex_inputs);
         previous = current;
@@ -129,7 +130,7 @@ mod tests {
     }
 
     fn roles(g: &Graph, node: &str) -> Vec<String> {
-        g.get(node).unwrap().inputs.iter().map(|(r, _)| r.clone()).collect()
+        g.get(node).unwrap().inputs.iter().map(|(r, _)| r.name()).collect()
     }
 
     /// Multi-BC's inputs follow its options: every earlier set as a baseline (at K = 3 the
@@ -155,7 +156,7 @@ mod tests {
         assert!(r.contains(&"reward".to_string()) && r.contains(&"eval1".to_string()) && !r.contains(&"judge".to_string()), "{r:?}");
         assert!(g.get("idrex-multi-bc/k1/judge").is_none());
         let inputs = &g.get("idrex-multi-bc/k1/rollouts").unwrap().inputs;
-        assert!(inputs.contains(&("eval0".to_string(), "drex/eval/0".to_string())), "{inputs:?}");
+        assert!(inputs.contains(&(Series::Eval.at(0), "drex/eval/0".to_string())), "{inputs:?}");
 
         let g = graph("idrex:\n  multi_bc_filter: none\n");
         let r = roles(&g, "idrex-multi-bc/k1/rollouts");

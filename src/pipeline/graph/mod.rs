@@ -14,6 +14,7 @@ use std::collections::BTreeMap;
 
 use super::Pipeline;
 use super::config::Method;
+use super::role::{Role, Series};
 use super::stage::{Params, StageKind, bc, demos, eval, noise, ppo, trex};
 use crate::store;
 use idrex::{DrexNodes, Variant};
@@ -25,7 +26,7 @@ pub struct Node {
     pub params: Params,
     pub seed: u64,
     /// (role, node name); roles are unique within a node.
-    pub inputs: Vec<(String, String)>,
+    pub inputs: Vec<(Role, String)>,
 }
 
 impl Node {
@@ -44,7 +45,7 @@ impl Graph {
         self.nodes.iter().find(|n| n.name == name)
     }
 
-    pub fn push(&mut self, name: impl Into<String>, params: Params, seed: u64, inputs: Vec<(String, String)>) -> String {
+    pub fn push(&mut self, name: impl Into<String>, params: Params, seed: u64, inputs: Vec<(Role, String)>) -> String {
         let name = name.into();
         debug_assert!(inputs.iter().all(|(_, i)| self.get(i).is_some()), "inputs come first");
         self.nodes.push(Node { name: name.clone(), params, seed, inputs });
@@ -56,7 +57,7 @@ impl Graph {
     pub fn keys(&self) -> BTreeMap<String, String> {
         let mut keys: BTreeMap<String, String> = BTreeMap::new();
         for n in &self.nodes {
-            let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.clone(), keys[src].clone())).collect();
+            let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), keys[src].clone())).collect();
             let k = store::key(n.kind().name(), n.kind().version(), &n.params.key_json(), n.seed, &inputs);
             keys.insert(n.name.clone(), k);
         }
@@ -71,7 +72,7 @@ impl Graph {
             .nodes
             .iter()
             .filter_map(|n| {
-                let inputs = n.inputs.iter().map(|(role, src)| Some((role.clone(), strip(src)?))).collect::<Option<_>>()?;
+                let inputs = n.inputs.iter().map(|(role, src)| Some((*role, strip(src)?))).collect::<Option<_>>()?;
                 Some(Node { name: strip(&n.name)?, params: n.params.clone(), seed: n.seed, inputs })
             })
             .collect();
@@ -90,8 +91,8 @@ impl Graph {
     }
 }
 
-pub(super) fn io(role: &str, src: &str) -> (String, String) {
-    (role.to_string(), src.to_string())
+pub(super) fn io(role: Role, src: &str) -> (Role, String) {
+    (role, src.to_string())
 }
 
 /// A T-REX node's parameters for `m` on the given ranked sets.
@@ -118,12 +119,12 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .iter()
         .enumerate()
         .map(|(r, &seed)| {
-            let mut inputs = vec![io("reward", reward)];
+            let mut inputs = vec![io(Role::Reward, reward)];
             if p.composition.needs_ranked_set() {
                 // D-REX's ranked set, the reward's first: where the ranked floor and the
                 // ceiling are measured.
-                let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| role == "set0")).map(|(_, n)| n.clone());
-                inputs.push(io("floor", &set0.expect("a T-REX node trains on set0")));
+                let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| *role == Series::Set.at(0))).map(|(_, n)| n.clone());
+                inputs.push(io(Role::Floor, &set0.expect("a T-REX node trains on set0")));
             }
             let run = g.push(
                 format!("{prefix}/ppo/{r}"),
@@ -135,7 +136,7 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
                 format!("{prefix}/eval/{r}"),
                 eval_params(p, m, iteration, r),
                 seed,
-                vec![io("policy", &run), io("reward", reward), io("demos", demos)],
+                vec![io(Role::Policy, &run), io(Role::Reward, reward), io(Role::Demos, demos)],
             );
             run
         })
@@ -194,12 +195,12 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
                 seed0,
                 vec![],
             );
-            g.push("demos", Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }), seed0, vec![io("policy", &d)])
+            g.push("demos", Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }), seed0, vec![io(Role::Policy, &d)])
         }
     };
-    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone(), device: p.device }), seed0, vec![io("demos", &demos)]);
+    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone(), device: p.device }), seed0, vec![io(Role::Demos, &demos)]);
     if wants(Method::Bc) {
-        g.push("bc/eval", eval_params(p, Method::Bc, 0, 0), seed0, vec![io("policy", &bc), io("demos", &demos)]);
+        g.push("bc/eval", eval_params(p, Method::Bc, 0, 0), seed0, vec![io(Role::Policy, &bc), io(Role::Demos, &demos)]);
     }
     let variants: Vec<Variant> = Variant::ALL.into_iter().filter(|v| wants(v.method())).collect();
     if !wants(Method::Drex) && variants.is_empty() {
@@ -208,7 +209,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
     // D-REX's own BC where the file gives one that differs from the baseline's.
     let source = match &s.noise.bc {
         Some(cfg) if *cfg != s.bc => {
-            g.push("drex/bc", Params::Bc(bc::BcParams { env, bc: cfg.clone(), device: p.device }), seed0, vec![io("demos", &demos)])
+            g.push("drex/bc", Params::Bc(bc::BcParams { env, bc: cfg.clone(), device: p.device }), seed0, vec![io(Role::Demos, &demos)])
         }
         _ => bc.clone(),
     };
@@ -220,13 +221,13 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             rollouts_per_level: s.noise.rollouts_per_level,
         }),
         seed0,
-        vec![io("policy", &source)],
+        vec![io(Role::Policy, &source)],
     );
     let drex_trex = g.push(
         "drex/trex",
         trex_params(p, Method::Drex, vec![trex::RankedSet { level: 0, same_group: false }], false),
         seed0,
-        vec![io("set0", &noise), io("demos", &demos)],
+        vec![io(Series::Set.at(0), &noise), io(Role::Demos, &demos)],
     );
     let drex_ppo = rl_runs(&mut g, p, Method::Drex, "drex", 1, &drex_trex, &demos);
     let drex = DrexNodes { demos: &demos, bc: &source, noise: &noise, trex: &drex_trex, ppo: &drex_ppo };
@@ -354,7 +355,7 @@ mod tests {
             let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}{extra}")).unwrap();
             expand(&p).unwrap().get("drex/ppo/0").unwrap().inputs.clone()
         };
-        let floor = ("floor".to_string(), "drex/noise".to_string());
+        let floor = (Role::Floor, "drex/noise".to_string());
         for extra in ["", "reward:\n  ceiling: none\n", "reward:\n  level: running\n"] {
             assert!(ppo_inputs(extra).contains(&floor), "{extra}");
         }
@@ -439,8 +440,8 @@ mod tests {
         }
         assert_eq!(g.subgraph("Walker2d-v5/").nodes, walker.nodes);
         let ppo = g.get("Walker2d-v5/drex/ppo/0").unwrap();
-        let reward = |role: &str, node: &str| (role.to_string(), format!("Walker2d-v5/drex/{node}"));
-        assert_eq!(ppo.inputs, vec![reward("reward", "trex"), reward("floor", "noise")]);
+        let reward = |role: Role, node: &str| (role, format!("Walker2d-v5/drex/{node}"));
+        assert_eq!(ppo.inputs, vec![reward(Role::Reward, "trex"), reward(Role::Floor, "noise")]);
         // Each environment keeps its own defaults (the control-cost weight differs).
         assert_ne!(study.for_env(crate::env::EnvId::HalfCheetah).composition, study.composition);
 
@@ -521,7 +522,7 @@ mod tests {
                 assert_ne!(&kt[name], key, "{name}: teeth, the baseline's BC would change it");
             }
         }
-        assert_eq!(split.get("drex/noise").unwrap().inputs, vec![("policy".to_string(), "drex/bc".to_string())]);
+        assert_eq!(split.get("drex/noise").unwrap().inputs, vec![(Role::Policy, "drex/bc".to_string())]);
         // The same settings twice: one BC stage.
         let same = parse(plain, Some(plain));
         assert!(same.get("drex/bc").is_none());

@@ -4,6 +4,7 @@ use crate::algo::bc::{self, BcConfig, BcReport};
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::Device;
+use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -16,7 +17,7 @@ pub struct BcParams {
 }
 
 pub fn run(p: &BcParams, ctx: &StageCtx) -> Result<BcReport> {
-    let trajs = read_rollouts(ctx.input("demos")?)?;
+    let trajs = read_rollouts(ctx.input(Role::Demos)?)?;
     ctx.progress.set_message("behavioural cloning");
     let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed, ctx.threads, p.device)?;
     policy.env = Some(p.env.name().to_string());

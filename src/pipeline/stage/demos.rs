@@ -9,6 +9,7 @@ use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::log::mcap;
+use crate::pipeline::role::Role;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
 
@@ -65,7 +66,7 @@ pub struct DemosParams {
 /// Rollouts of the demonstrator's stochastic policy, episode k from `derive(seed, Episode, k)`.
 pub fn demos(p: &DemosParams, ctx: &StageCtx) -> Result<RolloutSummary> {
     let mut env = Env::new(p.env)?;
-    let policy = load_policy_for(ctx.input("policy")?, &env, p.env)?;
+    let policy = load_policy_for(ctx.input(Role::Policy)?, &env, p.env)?;
     let meta = TrajMeta { source: "demonstrator".into(), ..Default::default() };
     let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes, ctx.seed, Purpose::Episode, &meta);
     ctx.write_rollouts(p.env, &trajs, None)?;

@@ -12,6 +12,7 @@ use crate::env::{Env, EnvId};
 use crate::error::Result;
 use crate::nn::{ActorCritic, RewardEnsemble};
 use crate::pipeline::config::Method;
+use crate::pipeline::role::Role;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
 use crate::stats::{nan_as_null, pairwise_accuracy, pearson, spearman};
@@ -71,12 +72,12 @@ pub struct EvalMetrics {
 
 pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
     let mut env = Env::new(p.env)?;
-    let policy_dir = ctx.input("policy")?;
-    let reward = match ctx.inputs.get("reward") {
+    let policy_dir = ctx.input(Role::Policy)?;
+    let reward = match ctx.inputs.get(&Role::Reward) {
         None => None,
         Some(dir) => {
             let model = RewardEnsemble::load(&dir.join(REWARD))?;
-            let reference = member_stats(&model, &read_rollouts(ctx.input("demos")?)?);
+            let reference = member_stats(&model, &read_rollouts(ctx.input(Role::Demos)?)?);
             Some((model, reference))
         }
     };

@@ -28,7 +28,6 @@ pub mod eval;
 pub mod idrex;
 pub mod noise;
 pub mod ppo;
-pub mod test_value;
 pub mod trex;
 
 use std::collections::BTreeMap;
@@ -39,6 +38,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 pub use super::kind::StageKind;
+use super::role::{Role, Series};
 
 use crate::data::Trajectory;
 use crate::env::{Env, EnvId};
@@ -114,7 +114,6 @@ stage_kinds! {
     InterpolationRollouts: idrex::interpolation::Params => DegradationMetrics, idrex::interpolation::run;
     ActionNoiseRollouts: idrex::action_noise::Params => DegradationMetrics, idrex::action_noise::run;
     MultiBcRollouts: idrex::multi_bc::Params => idrex::multi_bc::Metrics, idrex::multi_bc::run;
-    TestValue: test_value::Params => test_value::Metrics, test_value::run;
 }
 
 impl Params {
@@ -179,7 +178,7 @@ impl Typed {
 pub struct StageCtx<'a> {
     pub seed: u64,
     /// Input role -> artifact directory.
-    pub inputs: BTreeMap<String, PathBuf>,
+    pub inputs: BTreeMap<Role, PathBuf>,
     pub out: &'a Path,
     /// Threads the stage may use for work whose result does not depend on their number.
     pub threads: usize,
@@ -187,13 +186,13 @@ pub struct StageCtx<'a> {
 }
 
 impl StageCtx<'_> {
-    pub fn input(&self, role: &str) -> Result<&Path> {
-        self.inputs.get(role).map(PathBuf::as_path).ok_or_else(|| Error::Invalid(format!("stage has no input '{role}'")))
+    pub fn input(&self, role: Role) -> Result<&Path> {
+        self.inputs.get(&role).map(PathBuf::as_path).ok_or_else(|| Error::Invalid(format!("stage has no input '{role}'")))
     }
 
-    /// Inputs named `<prefix>0`, `<prefix>1`, ... in order.
-    pub fn numbered(&self, prefix: &str) -> Vec<&Path> {
-        (0..).map_while(|i| self.inputs.get(&format!("{prefix}{i}")).map(PathBuf::as_path)).collect()
+    /// The inputs of a series, `0, 1, ...` in order.
+    pub fn numbered(&self, series: Series) -> Vec<&Path> {
+        (0..).map_while(|i| self.inputs.get(&series.at(i)).map(PathBuf::as_path)).collect()
     }
 
     pub fn write_rollouts(&self, env: EnvId, trajs: &[Trajectory], learned: Option<&[Vec<f64>]>) -> Result<()> {

@@ -5,6 +5,7 @@ use crate::algo::noise;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
+use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -23,7 +24,7 @@ pub struct NoiseMetrics {
 
 pub fn run(p: &NoiseParams, ctx: &StageCtx) -> Result<NoiseMetrics> {
     let mut env = Env::new(p.env)?;
-    let policy = load_policy_for(ctx.input("policy")?, &env, p.env)?;
+    let policy = load_policy_for(ctx.input(Role::Policy)?, &env, p.env)?;
     ctx.progress.set_message("epsilon-greedy rollouts");
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
     let trajs = noise::epsilon_greedy(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta);

@@ -10,6 +10,7 @@ use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::reward::{Composition, RewardLevel};
 use crate::nn::{Device, RewardEnsemble};
+use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -48,9 +49,9 @@ pub const CURVE: &str = "curve.csv";
 
 pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
-    let mut reward = RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?;
+    let mut reward = RewardEnsemble::load(&ctx.input(Role::Reward)?.join(REWARD))?;
     if p.reward.needs_ranked_set() {
-        let set = super::read_rollouts(ctx.input("floor")?)?;
+        let set = super::read_rollouts(ctx.input(Role::Floor)?)?;
         if p.reward.level == RewardLevel::RankedFloor {
             reward.fix_levels_from(&set)?;
         }

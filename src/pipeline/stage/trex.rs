@@ -9,6 +9,7 @@ use crate::data::Trajectory;
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::Device;
+use crate::pipeline::role::{Role, Series};
 use crate::stats::{nan_as_null, pearson, spearman};
 
 /// How one ranked input set takes part.
@@ -67,7 +68,7 @@ pub struct TrexMetrics {
 pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
     let mut trajs = Vec::new();
     let mut ranking = Ranking { same_group: true, cross_level: p.cross_level, ..Default::default() };
-    for (i, dir) in ctx.numbered("set").into_iter().enumerate() {
+    for (i, dir) in ctx.numbered(Series::Set).into_iter().enumerate() {
         let set = p.sets.get(i).copied().unwrap_or(RankedSet { level: 0, same_group: false });
         let grouped = set.same_group || p.trex.same_group;
         for t in read_rollouts(dir)? {
@@ -85,7 +86,7 @@ pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
         truth: ts.iter().map(Trajectory::ret).collect(),
     };
     let train = score(&trajs);
-    let demos = score(&read_rollouts(ctx.input("demos")?)?);
+    let demos = score(&read_rollouts(ctx.input(Role::Demos)?)?);
     Ok(TrexMetrics {
         val_accuracy: reports.iter().map(|r| r.val_accuracy).sum::<f64>() / reports.len() as f64,
         models: reports,

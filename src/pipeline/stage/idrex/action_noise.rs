@@ -5,6 +5,7 @@ use crate::algo::noise::NoiseProcess;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
+use crate::pipeline::role::Series;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -22,7 +23,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<DegradationMetrics> {
     let mut env = Env::new(p.env)?;
     let ad = env.act_dim();
     let mut trajs = Vec::new();
-    for (r, dir) in ctx.numbered("policy").into_iter().enumerate() {
+    for (r, dir) in ctx.numbered(Series::Policy).into_iter().enumerate() {
         let policy = load_policy_for(dir, &env, p.env)?;
         let meta = TrajMeta { source: format!("action-noise/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::Source, r as u64);

@@ -6,6 +6,7 @@ use crate::algo::noise::Interpolation;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
+use crate::pipeline::role::Series;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -22,7 +23,7 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<DegradationMetrics> {
     let mut env = Env::new(p.env)?;
     let noise: Vec<f64> = p.alphas.iter().map(|a| 1.0 - a).collect();
     let mut trajs = Vec::new();
-    for (r, (n, o)) in ctx.numbered("policy").into_iter().zip(ctx.numbered("older")).enumerate() {
+    for (r, (n, o)) in ctx.numbered(Series::Policy).into_iter().zip(ctx.numbered(Series::Older)).enumerate() {
         let (newer, older) = (load_policy_for(n, &env, p.env)?, load_policy_for(o, &env, p.env)?);
         let meta = TrajMeta { source: format!("interpolation/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::Source, r as u64);

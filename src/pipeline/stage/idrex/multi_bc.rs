@@ -19,6 +19,7 @@ use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::nn::{Device, RewardEnsemble};
 use crate::pipeline::config::{CloneConfig, CloneFilter, CloneSource};
+use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::{DegradationLevel, Metrics as AnyMetrics, REWARD, StageCtx, Typed, degradation, read_rollouts};
 use crate::seed::{self, Purpose};
 
@@ -84,19 +85,19 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
 pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     let mut env = Env::new(p.env)?;
     // Each reward with its units, measured once on the demonstrations.
-    let demos = read_rollouts(ctx.input("demos")?)?;
+    let demos = read_rollouts(ctx.input(Role::Demos)?)?;
     let scaled = |r: RewardEnsemble| {
         let scale = demo_scale(&r, &demos);
         (r, scale)
     };
-    let previous = scaled(RewardEnsemble::load(&ctx.input("reward")?.join(REWARD))?);
+    let previous = scaled(RewardEnsemble::load(&ctx.input(Role::Reward)?.join(REWARD))?);
     let judge = match p.filter {
         CloneFilter::None | CloneFilter::PreviousReward => None,
-        CloneFilter::HeldOutReward => Some(scaled(RewardEnsemble::load(&ctx.input("judge")?.join(REWARD))?)),
+        CloneFilter::HeldOutReward => Some(scaled(RewardEnsemble::load(&ctx.input(Role::Judge)?.join(REWARD))?)),
     };
     // The newest earlier set with rollouts (an earlier multi-BC set may have kept none).
     let mut baseline = None;
-    for (i, dir) in ctx.numbered("baseline").into_iter().enumerate() {
+    for (i, dir) in ctx.numbered(Series::Baseline).into_iter().enumerate() {
         let set = read_rollouts(dir)?;
         if !set.is_empty() {
             baseline = Some((i, least_noisy(&set)));
@@ -104,11 +105,11 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     }
     let source_step = match p.clone.source {
         CloneSource::Final => None,
-        CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered("eval"))?),
+        CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered(Series::Eval))?),
     };
     let random_return = clone::random_return(&mut env, p.clone.fidelity_episodes, ctx.seed);
     let (mut kept, mut extra, mut clones) = (Vec::new(), Vec::new(), Vec::new());
-    for (r, dir) in ctx.numbered("policy").into_iter().enumerate() {
+    for (r, dir) in ctx.numbered(Series::Policy).into_iter().enumerate() {
         ctx.progress.set_message(format!("clone {}", r + 1));
         let made = clone::make(&mut env, dir, source_step, &p.clone, p.env, ctx.seed, r, ctx.threads, p.device)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
