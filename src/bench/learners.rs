@@ -83,8 +83,8 @@ fn gemm_gflops(threads: usize, device: Device) -> f64 {
 }
 
 /// One thread's matrix-product rate at T-REX's hidden layer (a chunk of 200 rows through
-/// 256 x 256), in GFLOP/s, best of 5: idrex's kernel (`nn::gemm`, the active variant),
-/// libtorch's (MKL's) on the same operands, and idrex's bf16 product (`nn::bf16`, its active
+/// 256 x 256), in GFLOP/s, best of 5: idrex's kernel (`kernels::gemm`, the active variant),
+/// libtorch's (MKL's) on the same operands, and idrex's bf16 product (`kernels::bf16`, its active
 /// path).
 fn hidden_layer_gflops() -> (f64, f64, f64) {
     let (m, n, k) = (200usize, 256usize, 256usize);
@@ -115,7 +115,7 @@ fn hidden_layer_gflops() -> (f64, f64, f64) {
 
 /// The learned reward's inference, as PPO calls it once per rollout (2,048 rows of
 /// HalfCheetah's 17-dimensional observations through 3 models of [256, 256]), in rows per
-/// second, best of 5: idrex's CPU path (`RewardEnsemble::raw`, over `nn::gemm`) and
+/// second, best of 5: idrex's CPU path (`RewardEnsemble::raw`, over `kernels::gemm`) and
 /// libtorch's forward pass on the same networks and rows.
 fn reward_inference_rates() -> (f64, f64) {
     use crate::nn::reward::{RewardConfig, RewardEnsemble};

@@ -40,7 +40,7 @@ impl StageKind {
         match self {
             // 2: trained on nn::dense (explicit gradients over MKL's sgemm) instead of
             // libtorch's autograd, which sums in another order. 3: idrex's own products
-            // (nn::gemm) and initial weights (nn::init), the same bits on every processor.
+            // (kernels::gemm) and initial weights (nn::init), the same bits on every processor.
             StageKind::Bc | StageKind::Trex => 3,
             // 4: clones from deterministic, mean-labelled source episodes with early
             // stopping, fidelity measured, and a per-step filter.
@@ -48,7 +48,7 @@ impl StageKind {
             // 2: the networks' initial weights (PPO) and the learned reward's inference
             // (PPO, evaluation) from idrex's own code instead of libtorch's. 3 (PPO and the
             // demonstrator, which PPO trains): the minibatch update's products through
-            // nn::gemm (fused multiply-adds) instead of plain loops.
+            // kernels::gemm (fused multiply-adds) instead of plain loops.
             StageKind::Demonstrator | StageKind::Ppo => 3,
             StageKind::Eval => 2,
             _ => 1,

@@ -16,6 +16,8 @@ pub mod looks;
 mod notes;
 mod protocols;
 pub mod studies;
+#[cfg(test)]
+mod tests;
 
 use polars::prelude::*;
 

@@ -53,7 +53,7 @@ pub struct TrexConfig {
     /// Initialisation of the reward networks.
     pub init: WeightInit,
     /// The factors of the training products: f32 (the default) or bf16 with f32
-    /// accumulation (`nn::bf16`; native where the processor has AVX512-BF16, the same bits
+    /// accumulation (`kernels::bf16`; native where the processor has AVX512-BF16, the same bits
     /// emulated elsewhere). Inference is f32 either way.
     #[serde(skip_serializing_if = "Precision::is_f32")]
     pub precision: Precision,
