@@ -34,9 +34,7 @@ pub fn recompute(store: &Store, key: &str, threads: usize) -> Result<Recomputed>
     let mut inputs = BTreeMap::new();
     for (role, k) in &m.inputs {
         store.check(k).map_err(|problem| Error::Invalid(format!("input {role} ({k}) of {key} is corrupt: {problem}")))?;
-        let typed =
-            super::role::Role::parse(role).ok_or_else(|| Error::Invalid(format!("artifact {key}: no stage reads an input as '{role}'")))?;
-        inputs.insert(typed, store.input_dir(k)?);
+        inputs.insert(super::role::Role::recorded(role, &format!("artifact {key}"))?, store.input_dir(k)?);
     }
     let scratch = store.stage(&format!("recompute-{key}"))?;
     let bar = indicatif::ProgressBar::hidden();

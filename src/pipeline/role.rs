@@ -81,6 +81,12 @@ impl Role {
         Role::parse(name).and_then(Role::series) == Some(series)
     }
 
+    /// The role a recorded name of `what` (a node, an artifact) stands for, or the error
+    /// that names it.
+    pub fn recorded(name: &str, what: &str) -> crate::error::Result<Role> {
+        Role::parse(name).ok_or_else(|| crate::error::Error::Invalid(format!("{what}: no stage reads an input as '{name}'")))
+    }
+
     /// The role a recorded name stands for (the inverse of [`Role::name`]).
     pub fn parse(name: &str) -> Option<Role> {
         if let Some(r) = Role::SINGLE.into_iter().find(|r| r.name() == name) {

@@ -99,14 +99,8 @@ fn run_node(
         // A forced node is computed to the side; the stored artifact stays until the new one
         // replaces it.
         // An S3 store's inputs are downloaded into its local cache (and checked) first.
-        let input_dirs = inputs
-            .iter()
-            .map(|(name, k)| {
-                let role =
-                    Role::parse(name).ok_or_else(|| Error::Invalid(format!("{}: no stage reads an input as '{name}'", node.name)))?;
-                Ok((role, store.input_dir(k)?))
-            })
-            .collect::<Result<_>>()?;
+        let input_dirs =
+            inputs.iter().map(|(name, k)| Ok((Role::recorded(name, &node.name)?, store.input_dir(k)?))).collect::<Result<_>>()?;
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();

@@ -291,8 +291,8 @@ impl Store {
         self.backend.verify(self)
     }
 
-    /// Removes every artifact not in `keep` (and stale staging entries); returns what was
-    /// (or, with `dry_run`, would be) removed.
+    /// Removes every artifact not in `keep`; returns what was (or, with `dry_run`, would be)
+    /// removed.
     pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
         self.backend.gc(self, keep, dry_run)
     }
