@@ -1,6 +1,7 @@
 //! `idrex bench`: every benchmark is a ratio against a baseline measured in the same run.
 pub mod clones;
 pub mod env;
+pub mod exp;
 pub mod learners;
 pub mod ppo;
 pub mod scripts;

@@ -13,6 +13,7 @@ pub mod cli;
 pub mod data;
 pub mod env;
 pub mod error;
+pub mod exp;
 pub mod kernels;
 pub mod log;
 pub mod nn;

@@ -83,6 +83,10 @@ fn concrete_commands(line: &str) -> Option<Result<Vec<Vec<String>>, String>> {
             "P" => "python3",
             "ARG" => "--x",
             "NODE" => "bc",
+            "METHOD" => "drex",
+            "PROTOCOL" => "final",
+            "NAMES" => "ppo.,drex",
+            "BASELINE" => "b",
             "LEVER" => "original",
             "key" | "KEY" => "0000000000000000000000000000000000000000000000000000000000000000",
             "STUDY:BASELINE" | "STUDY" => "a:b",
@@ -227,4 +231,38 @@ fn analysis_commits_each_figure_once_and_its_links_resolve() {
         }
     }
     assert!(checked >= 100, "{checked} links");
+}
+
+/// Every command the binary has answers `--help`, and docs/cli.md shows it: walking clap's
+/// own command tree, so a new command without a line there fails here.
+#[test]
+fn every_command_answers_help_and_the_docs_list_it() {
+    use clap::CommandFactory;
+    fn leaves(cmd: &clap::Command, path: Vec<String>, out: &mut Vec<Vec<String>>) {
+        let subs: Vec<&clap::Command> = cmd.get_subcommands().filter(|c| c.get_name() != "help").collect();
+        if subs.is_empty() {
+            out.push(path.clone());
+        }
+        for s in subs {
+            let mut p = path.clone();
+            p.push(s.get_name().to_string());
+            leaves(s, p, out);
+        }
+    }
+    let mut all = Vec::new();
+    leaves(&idrex::cli::Cli::command(), vec![], &mut all);
+    let page = std::fs::read_to_string(repo("docs/cli.md")).unwrap();
+    let mut missing = Vec::new();
+    for path in &all {
+        let mut args: Vec<&str> = path.iter().map(String::as_str).collect();
+        args.push("--help");
+        let out = crate::util::idrex(&args);
+        assert!(out.status.success() && !crate::util::stdout(&out).is_empty(), "idrex {}: {}", args.join(" "), crate::util::stderr(&out));
+        let shown = format!("    idrex {}", path.join(" "));
+        if !page.lines().any(|l| l == shown || l.starts_with(&format!("{shown} "))) {
+            missing.push(path.join(" "));
+        }
+    }
+    assert!(all.len() >= 20, "{} commands", all.len());
+    assert!(missing.is_empty(), "docs/cli.md shows no `idrex ...` line for: {missing:?}");
 }

@@ -7,6 +7,7 @@ mod defaults;
 mod docs;
 mod env_cli;
 mod env_equivalence;
+mod exp;
 mod layout;
 mod pipeline;
 mod recording;

@@ -2,6 +2,7 @@
 //! group; the work is done by library functions. `anyhow` lives here and in `main.rs` only;
 //! the library returns [`crate::Error`].
 mod env;
+mod exp;
 mod logs;
 mod pipeline;
 mod report;
@@ -49,6 +50,9 @@ pub enum Command {
     Logs(logs::LogsCommand),
     /// Comparison tables (CSV and markdown) from the store's evaluation results.
     Report(report::ReportArgs),
+    /// The store's studies at a glance (`show`), and two of them side by side (`diff`).
+    #[command(subcommand)]
+    Exp(exp::ExpCommand),
 }
 
 #[derive(Debug, Subcommand)]
@@ -68,6 +72,8 @@ pub enum BenchCommand {
     /// Multi-BC's clone settings on a pipeline's stored D-REX runs: each clone's noise-free
     /// true return against its source's (0 = uniform-random, 1 = the source).
     Clones(crate::bench::clones::ClonesBenchArgs),
+    /// `exp show` on a generated store of many studies, next to reading its manifests alone.
+    Exp(crate::bench::exp::ExpBenchArgs),
 }
 
 pub fn init_tracing(verbose: u8) {
@@ -97,6 +103,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             let (p, store) = pipeline::load(&args.file, args.store.as_deref(), None, pipeline::StoreAccess::Read)?;
             crate::bench::clones::clones_bench(&args, &p, &store)
         }
+        Command::Bench(BenchCommand::Exp(args)) => Ok(crate::bench::exp::exp_bench(&args)?),
         Command::Train(cmd) => train::run(&cmd),
         Command::Eval(args) => train::eval(&args),
         Command::Pipeline(cmd) => pipeline::run(&cmd),
@@ -105,5 +112,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Gc(args) => store::gc(&args),
         Command::Logs(cmd) => logs::run(&cmd),
         Command::Report(args) => report::run(&args),
+        Command::Exp(cmd) => exp::run(&cmd),
     }
 }

@@ -16,6 +16,7 @@ pub mod looks;
 mod notes;
 mod protocols;
 pub mod studies;
+pub mod table;
 #[cfg(test)]
 mod tests;
 
