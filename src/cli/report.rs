@@ -8,7 +8,11 @@ use clap::{Args, ValueEnum};
 pub enum ReportFormat {
     Csv,
     Md,
+    /// CSV and markdown.
     Both,
+    /// One self-contained page, `report.html`: sortable tables, figures inline, details
+    /// folded, links to the rollouts and recordings.
+    Html,
 }
 
 #[derive(Debug, Args)]
@@ -27,12 +31,16 @@ pub struct ReportArgs {
     /// The figures' files (`svg` for what is committed: half the size, and it scales).
     #[arg(long, value_enum, default_value_t = crate::report::figures::FigureFormats::Both)]
     pub figures: crate::report::figures::FigureFormats,
+    /// A Rerun recording the HTML page links to (repeatable).
+    #[arg(long, value_name = "FILE.rrd")]
+    pub recording: Vec<PathBuf>,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let store =
         super::store::existing(&args.store, false, "run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store")?;
-    let store = crate::report::Artifacts::read(&store)?;
+    let handle = store;
+    let store = crate::report::Artifacts::read(&handle)?;
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
@@ -53,7 +61,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         comparisons.extend(rows);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-    if args.format != ReportFormat::Md {
+    if matches!(args.format, ReportFormat::Csv | ReportFormat::Both) {
         crate::report::write_csv(&mut t.returns, &args.out.join("returns.csv"))?;
         crate::report::write_csv(&mut t.demos, &args.out.join("demos.csv"))?;
         crate::report::write_csv(&mut t.accuracy, &args.out.join("reward_accuracy.csv"))?;
@@ -81,8 +89,16 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         crate::report::comparisons::comparison_markdown(&comparisons),
         crate::report::figures::markdown(&figures, "figures", args.figures)
     );
-    if args.format != ReportFormat::Csv {
+    if matches!(args.format, ReportFormat::Md | ReportFormat::Both) {
         std::fs::write(args.out.join("report.md"), &md)?;
+    }
+    if args.format == ReportFormat::Html {
+        use crate::report::html;
+        let recordings = args.recording.iter().map(|r| std::fs::canonicalize(r).unwrap_or(r.clone()).display().to_string()).collect();
+        let links = html::Links { rollouts: html::rollout_links(&store, &handle), recordings };
+        let page = args.out.join("report.html");
+        std::fs::write(&page, html::page(&md, &args.out, &links)).with_context(|| format!("cannot write {}", page.display()))?;
+        eprintln!("wrote {}", page.display());
     }
     print!("{md}");
     Ok(())

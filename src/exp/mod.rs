@@ -14,9 +14,8 @@ pub mod synthetic;
 
 use crate::algo::scoring::{CheckpointEval, select};
 use crate::env::EnvId;
-use crate::pipeline::Method;
 use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
-use crate::report::Protocol;
+use crate::report::{Protocol, method_label};
 use crate::stats::{ReturnStats, bootstrap_ci, hierarchical_ci, mean};
 use crate::store::{Manifest, TestSetMark};
 
@@ -65,11 +64,6 @@ impl Replicate {
     pub fn score(&self, protocol: Protocol) -> Option<f64> {
         self.run_means(protocol).and_then(|v| mean(&v))
     }
-}
-
-/// A method's label in every table: its name, with the iteration past the report's two.
-pub fn method_label(method: Method, iteration: usize) -> String {
-    if iteration > 2 { format!("{} (k={iteration})", method.name()) } else { method.name().to_string() }
 }
 
 /// One study: its shape, its resolved configuration, and its final-policy scores.

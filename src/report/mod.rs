@@ -11,6 +11,7 @@ pub mod answer;
 pub mod clones;
 pub mod comparisons;
 pub mod figures;
+pub mod html;
 pub mod improvement;
 pub mod looks;
 mod notes;
@@ -38,6 +39,11 @@ use protocols::{RunEval, protocol_rows, protocols_markdown};
 
 pub(crate) fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
+}
+
+/// A method's label in every table: its name, with the iteration past the report's two.
+pub fn method_label(method: Method, iteration: usize) -> String {
+    if iteration > 2 { format!("{} (k={iteration})", method.name()) } else { method.name().to_string() }
 }
 
 /// A table of the report: one pipeline's runs, or one replicate's of a study.
@@ -120,7 +126,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
             }
         };
         let e = p.env.name().to_string();
-        let label = if p.iteration > 2 { format!("{} (k={})", p.method.name(), p.iteration) } else { p.method.name().to_string() };
+        let label = method_label(p.method, p.iteration);
         let table = Table { label: p.table(), study: p.pipeline.clone(), replicate: p.replicate };
         for &r in &x.summary.returns {
             env.push(e.clone());
