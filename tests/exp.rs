@@ -107,4 +107,40 @@ print("ok")
     }
     let none = exp(&["show", "--env", "Walker2d-v5"]);
     assert_eq!(stdout(&none).lines().count(), 1, "a header and no rows: {}", stdout(&none));
+
+    // Every other command with a table emits it as CSV and JSON too, on the same store.
+    let base = dir.join("base.yaml");
+    let b = base.to_str().unwrap();
+    let check = r#"
+import csv, json, sys
+kind, text = sys.argv[1], sys.stdin.read()
+rows = json.loads(text) if kind == "json" else list(csv.DictReader(text.splitlines()))
+print(len(rows), sorted(set(r[sys.argv[2]] for r in rows)))
+"#;
+    let table = |args: &[&str], kind: &str, column: &str| {
+        let out = idrex(args);
+        assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+        let mut child = Command::new(python())
+            .args(["-c", check, kind, column])
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::io::Write::write_all(&mut child.stdin.take().unwrap(), &out.stdout).unwrap();
+        String::from_utf8(child.wait_with_output().unwrap().stdout).unwrap().trim().to_string()
+    };
+    let stored = std::fs::read_dir(&store).unwrap().flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count();
+    assert_eq!(table(&["verify", "--store", s, "--csv"], "csv", "state"), format!("{stored} ['intact']"));
+    let nodes = table(&["pipeline", "status", b, "--store", s, "--json"], "json", "state");
+    assert!(nodes.ends_with(" ['stored']"), "{nodes}");
+    assert_eq!(
+        table(&["pipeline", "plan", b, "--store", s, "--csv"], "csv", "stored"),
+        format!("{} ['true']", nodes.split(' ').next().unwrap())
+    );
+    // The other study's PPO runs and evaluations (BC's too: an evaluation names its study)
+    // are not the base file's; BC and the rewards are shared: 2 replicates x (2 PPO + 3 evals).
+    assert_eq!(table(&["gc", b, "--store", s, "--json"], "json", "kind"), "10 ['eval', 'ppo']");
+    let mcap = std::fs::read_dir(&store).unwrap().flatten().map(|e| e.path().join("rollouts.mcap")).find(|p| p.exists()).unwrap();
+    let episodes = table(&["logs", "list", mcap.to_str().unwrap(), "--csv"], "csv", "end");
+    assert!(episodes.starts_with(|c: char| c.is_ascii_digit()) && !episodes.starts_with("0 "), "{episodes}");
 }

@@ -179,7 +179,7 @@ fn learner_rates(args: &LearnersBenchArgs, threads: usize, device: Device, preci
     Ok(((3 * args.trex_iterations) as f64 / trex_s, args.bc_iterations as f64 / bc_s))
 }
 
-pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
+pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<serde_json::Value> {
     let threads = args.threads.max(1);
     let device = args.device.resolve();
     device.ensure_available()?;
@@ -243,6 +243,5 @@ pub fn learners_bench(args: &LearnersBenchArgs) -> anyhow::Result<()> {
         },
         "pytorch": torch,
     });
-    println!("{}", serde_json::to_string_pretty(&out)?);
-    Ok(())
+    Ok(out)
 }

@@ -44,7 +44,7 @@ fn mj_bound(id: EnvId, steps: usize) -> anyhow::Result<f64> {
     Ok(raw_pass(&mut env, &actions, &ends) / env.spec().frame_skip as f64)
 }
 
-pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
+pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<serde_json::Value> {
     use crate::algo::ppo::{self, PpoConfig, RewardSource};
     crate::nn::single_threaded();
     let bound = mj_bound(args.env, 50_000)?;
@@ -102,6 +102,5 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<()> {
             "rest": phase(p.other_s),
         },
     });
-    println!("{}", serde_json::to_string_pretty(&out)?);
-    Ok(())
+    Ok(out)
 }

@@ -74,7 +74,7 @@ fn summary(runs: &[Quality]) -> serde_json::Value {
     })
 }
 
-pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
+pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<serde_json::Value> {
     use crate::kernels::bf16::{Bf16Path, Precision};
     use crate::{algo::trex, stats};
     let policy = crate::nn::ActorCritic::load(&args.policy)?;
@@ -129,6 +129,5 @@ pub fn trex_bench(args: &TrexBenchArgs) -> anyhow::Result<()> {
         });
         out["bf16_speedup"] = serde_json::json!(secs(f) / secs(b));
     }
-    println!("{}", serde_json::to_string_pretty(&out)?);
-    Ok(())
+    Ok(out)
 }

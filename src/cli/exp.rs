@@ -4,8 +4,8 @@ use clap::{Args, Subcommand};
 
 use crate::env::EnvId;
 use crate::exp::{Study, diff, show, studies};
+use crate::log::table::Format;
 use crate::report::Protocol;
-use crate::report::table::Format;
 
 #[derive(Debug, Subcommand)]
 pub enum ExpCommand {
@@ -27,25 +27,13 @@ pub struct Output {
     /// Headlines under these protocols (repeatable; the final policy by default).
     #[arg(long, value_parser = parse_protocol)]
     pub protocol: Vec<Protocol>,
-    /// CSV on stdout (intervals as `_ci_low` and `_ci_high` columns).
-    #[arg(long, conflicts_with_all = ["json", "markdown"])]
-    pub csv: bool,
-    /// JSON on stdout: an array of objects, keys in column order.
-    #[arg(long, conflicts_with = "markdown")]
-    pub json: bool,
-    /// A markdown table.
-    #[arg(long)]
-    pub markdown: bool,
+    #[command(flatten)]
+    pub table: super::TableArgs,
 }
 
 impl Output {
     fn format(&self) -> Format {
-        match (self.csv, self.json, self.markdown) {
-            (true, ..) => Format::Csv,
-            (_, true, _) => Format::Json,
-            (.., true) => Format::Markdown,
-            _ => Format::Text,
-        }
+        self.table.format()
     }
 
     fn protocols(&self) -> Vec<Protocol> {
@@ -54,6 +42,7 @@ impl Output {
 
     fn studies(&self) -> anyhow::Result<Vec<Study>> {
         let store = super::store::existing(&self.store, false, "give --store, or run a pipeline first")?;
+        let _reading = crate::log::progress::Activity::start("reading the store's manifests");
         Ok(studies(&store.unverified_manifests()?))
     }
 }

@@ -7,11 +7,16 @@ use clap::Subcommand;
 
 use crate::log::export::{self, ExportFormat};
 use crate::log::mcap;
+use crate::log::table::{Cell, Table};
 
 #[derive(Debug, Subcommand)]
 pub enum LogsCommand {
     /// Episodes with length, return and noise level.
-    List { file: PathBuf },
+    List {
+        file: PathBuf,
+        #[command(flatten)]
+        table: super::TableArgs,
+    },
     /// The steps of one episode, one JSON line each.
     Show {
         file: PathBuf,
@@ -30,11 +35,12 @@ pub enum LogsCommand {
 
 pub fn run(cmd: &LogsCommand) -> anyhow::Result<()> {
     match cmd {
-        LogsCommand::List { file } => {
+        LogsCommand::List { file, table } => {
             let r = mcap::read(file)?;
-            println!("{}: {} episodes of {}", file.display(), r.trajectories.len(), r.env);
-            println!("{:>7} {:>7} {:>12} {:>8} {:>6} {:<11} source", "episode", "length", "return", "noise", "group", "end");
-            for (i, t) in r.trajectories.iter().enumerate() {
+            if !table.machine() {
+                println!("{}: {} episodes of {}", file.display(), r.trajectories.len(), r.env);
+            }
+            let rows = r.trajectories.iter().enumerate().map(|(i, t)| {
                 let end = if t.terminated {
                     "terminated"
                 } else if t.truncated {
@@ -42,8 +48,18 @@ pub fn run(cmd: &LogsCommand) -> anyhow::Result<()> {
                 } else {
                     "-"
                 };
-                println!("{i:>7} {:>7} {:>12.2} {:>8.3} {:>6} {end:<11} {}", t.len(), t.ret(), t.meta.noise, t.meta.group, t.meta.source);
-            }
+                vec![
+                    Cell::int(i),
+                    Cell::int(t.len()),
+                    Cell::opt(Some(t.ret()), 2),
+                    Cell::opt(Some(t.meta.noise), 3),
+                    Cell::int(t.meta.group),
+                    Cell::text(end),
+                    Cell::text(&t.meta.source),
+                ]
+            });
+            let columns = ["episode", "length", "return", "noise", "group", "end", "source"].map(String::from).to_vec();
+            table.print(&Table { columns, rows: rows.collect() });
         }
         LogsCommand::Show { file, episode } => {
             let r = mcap::read(file)?;

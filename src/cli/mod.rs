@@ -10,7 +10,43 @@ mod stage;
 mod store;
 mod train;
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
+
+use crate::log::table::{Format, Table};
+
+/// How a command with tabular output prints it: aligned text by default.
+#[derive(Debug, Clone, Args)]
+pub struct TableArgs {
+    /// CSV on stdout (an interval as `_ci_low` and `_ci_high` columns).
+    #[arg(long, conflicts_with_all = ["json", "markdown"])]
+    pub csv: bool,
+    /// JSON on stdout: an array of objects, keys in column order.
+    #[arg(long, conflicts_with = "markdown")]
+    pub json: bool,
+    /// A markdown table.
+    #[arg(long)]
+    pub markdown: bool,
+}
+
+impl TableArgs {
+    pub fn format(&self) -> Format {
+        match (self.csv, self.json, self.markdown) {
+            (true, ..) => Format::Csv,
+            (_, true, _) => Format::Json,
+            (.., true) => Format::Markdown,
+            _ => Format::Text,
+        }
+    }
+
+    /// Whether a machine format was asked for (the command's own text is then left out).
+    pub fn machine(&self) -> bool {
+        self.format() != Format::Text
+    }
+
+    pub fn print(&self, t: &Table) {
+        print!("{}", t.write(self.format()));
+    }
+}
 
 #[derive(Debug, Parser)]
 #[command(name = "idrex", version, about = "Reward learning from automatically ranked demonstrations (D-REX, iD-REX)")]
@@ -92,13 +128,30 @@ pub fn init_tracing(verbose: u8) {
     unsafe { mujoco_rs::prelude::install_logging_hook() };
 }
 
+/// Runs a benchmark that answers once, at the end, under a spinner on stderr (a terminal
+/// only), cleared before its JSON is printed.
+fn quiet_until_done(what: &str, work: impl FnOnce() -> anyhow::Result<serde_json::Value>) -> anyhow::Result<()> {
+    let activity = crate::log::progress::Activity::start(what);
+    let out = work();
+    drop(activity);
+    println!("{}", serde_json::to_string_pretty(&out?)?);
+    Ok(())
+}
+
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Env(cmd) => env::run(&cmd),
         Command::Bench(BenchCommand::Env(args)) => crate::bench::env_bench(&args),
-        Command::Bench(BenchCommand::Trex(args)) => crate::bench::trex_bench(&args),
-        Command::Bench(BenchCommand::Learners(args)) => crate::bench::learners_bench(&args),
-        Command::Bench(BenchCommand::Ppo(args)) => crate::bench::ppo_bench(&args),
+        // These print once, at the end: a spinner shows they are at work until then.
+        Command::Bench(BenchCommand::Trex(args)) => {
+            quiet_until_done("bench trex: training and ranking", || crate::bench::trex_bench(&args))
+        }
+        Command::Bench(BenchCommand::Learners(args)) => {
+            quiet_until_done("bench learners: idrex, then PyTorch", || crate::bench::learners_bench(&args))
+        }
+        Command::Bench(BenchCommand::Ppo(args)) => {
+            quiet_until_done("bench ppo: idrex, then Stable-Baselines3", || crate::bench::ppo_bench(&args))
+        }
         Command::Bench(BenchCommand::Clones(args)) => {
             let (p, store) = pipeline::load(&args.file, args.store.as_deref(), None, pipeline::StoreAccess::Read)?;
             crate::bench::clones::clones_bench(&args, &p, &store)

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand};
 
+use crate::log::table::{Cell, Table};
 use crate::nn::DeviceChoice;
 use crate::pipeline::graph::{self, PlanFormat};
 use crate::pipeline::runner::{self, Status};
@@ -18,7 +19,7 @@ pub enum PipelineCommand {
     /// Print the DAG with each node's key and whether it is stored.
     Plan(PlanArgs),
     /// Each node's state: stored, queued, running (from Slurm's queue), failed or missing.
-    Status(PlanArgs),
+    Status(StatusArgs),
     /// Print the pipeline file's schema: JSON Schema (for editors that check YAML) or the
     /// reference table of docs/schema.md.
     Schema(SchemaArgs),
@@ -95,6 +96,22 @@ pub struct PlanArgs {
     /// The device to plan for (overrides the file's `device`), as `pipeline run --device`.
     #[arg(long, value_enum)]
     pub device: Option<DeviceChoice>,
+    /// The nodes as a table (node, kind, key, stored, inputs) in place of --format.
+    #[command(flatten)]
+    pub table: super::TableArgs,
+}
+
+#[derive(Debug, Args)]
+pub struct StatusArgs {
+    pub file: PathBuf,
+    /// Store directory or `s3://bucket/prefix` (overrides the pipeline file's `store`).
+    #[arg(long)]
+    pub store: Option<String>,
+    /// The device whose nodes to show (overrides the file's `device`).
+    #[arg(long, value_enum)]
+    pub device: Option<DeviceChoice>,
+    #[command(flatten)]
+    pub table: super::TableArgs,
 }
 
 pub fn run(cmd: &PipelineCommand) -> anyhow::Result<()> {
@@ -143,7 +160,7 @@ fn env_groups<'a, T>(p: &Pipeline, items: &'a [T], name: impl Fn(&T) -> &str) ->
     p.envs.iter().map(|e| (Some(e.name()), items.iter().filter(|t| name(t).starts_with(&format!("{}/", e.name()))).collect())).collect()
 }
 
-fn status(args: &PlanArgs) -> anyhow::Result<()> {
+fn status(args: &StatusArgs) -> anyhow::Result<()> {
     let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Read)?;
     store.index()?;
     let g = expand(&p)?;
@@ -157,8 +174,12 @@ fn status(args: &PlanArgs) -> anyhow::Result<()> {
         }
     };
     let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
+    let mut rows = Vec::new();
+    let text = !args.table.machine();
     for (env, nodes) in env_groups(&p, &g.nodes, |n| n.name.as_str()) {
-        if let Some(env) = env {
+        if let Some(env) = env
+            && text
+        {
             println!("{env}:");
         }
         for n in nodes {
@@ -171,8 +192,15 @@ fn status(args: &PlanArgs) -> anyhow::Result<()> {
                 NodeState::Failed { job, log } => format!("job {job}; log {}", log.display()),
                 NodeState::Stored | NodeState::Missing => String::new(),
             };
-            println!("  {:<34} {} {:<8} {detail}", n.name, &key[..12], state.label());
+            if text {
+                println!("  {:<34} {} {:<8} {detail}", n.name, &key[..12], state.label());
+            }
+            rows.push(vec![Cell::text(&n.name), Cell::text(key), Cell::text(state.label()), Cell::text(detail)]);
         }
+    }
+    if !text {
+        args.table.print(&Table { columns: ["node", "key", "state", "detail"].map(String::from).to_vec(), rows });
+        return Ok(());
     }
     let summary: Vec<String> = counts.iter().map(|(k, v)| format!("{v} {k}")).collect();
     println!("{} nodes in {}: {}", g.nodes.len(), store.location(), summary.join(", "));
@@ -226,6 +254,21 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     let g = expand(&p)?;
     let stored = |k: &str| store.check(k).is_ok();
     let keys = g.keys();
+    if args.table.machine() {
+        let rows = g.nodes.iter().map(|n| {
+            let inputs: Vec<String> = n.inputs.iter().map(|(role, src)| format!("{}={src}", role.name())).collect();
+            vec![
+                Cell::text(&n.name),
+                Cell::text(n.params.kind().name()),
+                Cell::text(&keys[&n.name]),
+                Cell::Flag(stored(&keys[&n.name])),
+                Cell::text(inputs.join(" ")),
+            ]
+        });
+        let columns = ["node", "kind", "key", "stored", "inputs"].map(String::from).to_vec();
+        args.table.print(&Table { columns, rows: rows.collect() });
+        return Ok(());
+    }
     print!("{}", graph::render(&g, &keys, &stored, args.format));
     if args.format == PlanFormat::Text && p.is_study() {
         println!();

@@ -41,6 +41,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         super::store::existing(&args.store, false, "run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store")?;
     let handle = store;
     let store = crate::report::Artifacts::read(&handle)?;
+    let building = crate::log::progress::Activity::start("report: tables, intervals and figures");
     let mut t = crate::report::build(&store)?;
     if t.returns.height() == 0 {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
@@ -83,6 +84,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     }
     let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"), args.figures)?;
     let notes = crate::report::notes(&store)?;
+    drop(building);
     let md = format!(
         "{}{}{notes}{}",
         crate::report::markdown(&t),

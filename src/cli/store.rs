@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::Args;
 
+use crate::log::table::{Cell, Table};
 use crate::nn::DeviceChoice;
 use crate::store::{Location, Store};
 
@@ -29,6 +30,10 @@ pub struct StoreArgs {
     /// whose bytes differ from the stored ones.
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "all")]
     pub recompute: Option<String>,
+    /// Every artifact as a table row (key, node, state, problem); with --recompute, every
+    /// recomputed one (key, node, same, differing files).
+    #[command(flatten)]
+    pub table: super::TableArgs,
 }
 
 #[derive(Debug, Args)]
@@ -41,6 +46,9 @@ pub struct GcArgs {
     /// Really delete (default: only list what would go).
     #[arg(long)]
     pub yes: bool,
+    /// What goes, as a table (key, node, kind, compute seconds, action).
+    #[command(flatten)]
+    pub table: super::TableArgs,
 }
 
 pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
@@ -48,10 +56,20 @@ pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
     let store = existing(&args.store, args.recompute.is_some(), GIVE_STORE)?;
     let keys = store.keys()?;
     let bad = store.verify()?;
-    for (k, problem) in &bad {
-        println!("corrupt {k}: {problem}");
+    let text = !args.table.machine();
+    if text {
+        for (k, problem) in &bad {
+            println!("corrupt {k}: {problem}");
+        }
+        println!("{} artifacts, {} corrupt", keys.len(), bad.len());
+    } else if args.recompute.is_none() {
+        let problems: std::collections::BTreeMap<&String, &String> = bad.iter().map(|(k, p)| (k, p)).collect();
+        let rows = keys.iter().map(|k| {
+            let problem = problems.get(k).map_or(String::new(), |p| p.to_string());
+            vec![Cell::text(k), Cell::text(if problem.is_empty() { "intact" } else { "corrupt" }), Cell::text(problem)]
+        });
+        args.table.print(&Table { columns: ["key", "state", "problem"].map(String::from).to_vec(), rows: rows.collect() });
     }
-    println!("{} artifacts, {} corrupt", keys.len(), bad.len());
     if !bad.is_empty() {
         bail!("{} corrupt artifacts in {}; `idrex pipeline run` recomputes them", bad.len(), store.location());
     }
@@ -62,16 +80,24 @@ pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
         };
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         let mut differ = 0;
-        for k in keys.iter().take(n) {
+        let mut rows = Vec::new();
+        for k in crate::log::progress::counted(keys.iter().take(n).collect(), "artifacts recomputed") {
             let r = crate::pipeline::recompute::recompute(&store, k, threads)?;
-            if r.differing.is_empty() {
-                println!("same    {} {}", &k[..12], r.node);
-            } else {
+            if !r.differing.is_empty() {
                 differ += 1;
+            }
+            if text && r.differing.is_empty() {
+                println!("same    {} {}", &k[..12], r.node);
+            } else if text {
                 println!("DIFFERS {} {}: {}", &k[..12], r.node, r.differing.join(", "));
             }
+            rows.push(vec![Cell::text(k), Cell::text(&r.node), Cell::Flag(r.differing.is_empty()), Cell::text(r.differing.join(" "))]);
         }
-        println!("{} recomputed, {differ} differ", n.min(keys.len()));
+        if text {
+            println!("{} recomputed, {differ} differ", n.min(keys.len()));
+        } else {
+            args.table.print(&Table { columns: ["key", "node", "same", "differing"].map(String::from).to_vec(), rows });
+        }
         if differ > 0 {
             // Bytes are the same on every processor and kernel variant, so nothing but a
             // defect (or other code under the same key) explains a difference.
@@ -95,13 +121,31 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
         }
     }
     // What each doomed artifact is, read before it goes.
-    let described: std::collections::BTreeMap<String, String> =
-        store.manifests()?.into_iter().map(|m| (m.key.clone(), format!("{} ({}, {:.0} s to compute)", m.node, m.kind, m.wall_s))).collect();
+    let described: std::collections::BTreeMap<String, crate::store::Manifest> =
+        store.manifests()?.into_iter().map(|m| (m.key.clone(), m)).collect();
     let stored = store.keys()?;
     let removed = store.gc(&keep, !args.yes)?;
+    let action = if args.yes { "removed" } else { "would remove" };
+    if args.table.machine() {
+        let rows = removed.iter().map(|k| {
+            let m = described.get(k);
+            vec![
+                Cell::text(k),
+                Cell::text(m.map_or("", |m| m.node.as_str())),
+                Cell::text(m.map_or("unreadable or partial", |m| m.kind.as_str())),
+                Cell::opt(m.map(|m| m.wall_s), 0),
+                Cell::text(action),
+            ]
+        });
+        args.table
+            .print(&Table { columns: ["key", "node", "kind", "compute_s", "action"].map(String::from).to_vec(), rows: rows.collect() });
+        return Ok(());
+    }
     for k in &removed {
-        let what = described.get(k).map_or("unreadable or partial artifact", String::as_str);
-        println!("{} {} {what}", if args.yes { "removed" } else { "would remove" }, &k[..k.len().min(12)]);
+        let what = described
+            .get(k)
+            .map_or("unreadable or partial artifact".to_string(), |m| format!("{} ({}, {:.0} s to compute)", m.node, m.kind, m.wall_s));
+        println!("{action} {} {what}", &k[..k.len().min(12)]);
     }
     println!(
         "{} artifacts {}; {} kept (of {} the pipeline files name)",

@@ -4,8 +4,8 @@
 //! seed set shares its randomness, and its rewards where only PPO changed); without a shared
 //! replicate only rliable's unpaired form can be given.
 use super::{RESAMPLES, Study};
+use crate::log::table::{Cell, Table};
 use crate::report::Protocol;
-use crate::report::table::{Cell, Table};
 use crate::stats::{Improvement, mean, probability_of_improvement, probability_of_improvement_independent_ci};
 
 /// Parameter, A's values, B's values: every resolved parameter whose values differ.

@@ -2,8 +2,8 @@
 //! method's headline.
 use super::{Study, changed, utc};
 use crate::env::EnvId;
+use crate::log::table::{Cell, Table};
 use crate::report::Protocol;
-use crate::report::table::{Cell, Table};
 use crate::store::TestSetMark;
 
 /// What to list and which columns to keep.

@@ -2,4 +2,6 @@
 //! themselves) and flat CSV/NDJSON exports of them, plots as Rerun recordings.
 pub mod export;
 pub mod mcap;
+pub mod progress;
 pub mod rerun;
+pub mod table;

@@ -7,7 +7,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::table::escape;
+use crate::log::table::escape;
 
 /// Sections whose title starts with one of these open folded: per-table detail.
 const FOLDED: [&str; 4] = ["Ground-truth return", "Learned reward on the policies", "Three protocols", "Multi-BC clones"];

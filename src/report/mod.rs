@@ -17,7 +17,6 @@ pub mod looks;
 mod notes;
 mod protocols;
 pub mod studies;
-pub mod table;
 #[cfg(test)]
 mod tests;
 

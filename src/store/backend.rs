@@ -10,6 +10,7 @@ use std::sync::atomic::Ordering;
 use super::s3::Created;
 use super::{Manifest, Store};
 use crate::error::{Error, Result};
+use crate::log::progress::counted;
 
 pub(crate) trait Backend: std::fmt::Debug + Send + Sync {
     /// The store's directory or URL, for messages.
@@ -119,11 +120,11 @@ impl Backend for Local {
 
     /// Corrupt ones are skipped, not moved.
     fn manifests(&self, store: &Store) -> Result<Vec<Manifest>> {
-        Ok(self.keys(store)?.iter().filter_map(|k| store.local_check(k).ok()).collect())
+        Ok(counted(self.keys(store)?, "artifacts re-hashed").filter_map(|k| store.local_check(&k).ok()).collect())
     }
 
     fn verify(&self, store: &Store) -> Result<Vec<(String, String)>> {
-        Ok(self.keys(store)?.into_iter().filter_map(|k| store.local_check(&k).err().map(|p| (k, p))).collect())
+        Ok(counted(self.keys(store)?, "artifacts re-hashed").filter_map(|k| store.local_check(&k).err().map(|p| (k, p))).collect())
     }
 
     fn gc(&self, store: &Store, keep: &BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {

@@ -105,7 +105,7 @@ impl Backend for Remote {
         // A store that cannot be asked is an error, not an empty table.
         self.index_blobs()?;
         let mut out = Vec::new();
-        for k in Remote::keys(self)? {
+        for k in crate::log::progress::counted(Remote::keys(self)?, "manifests read") {
             if let Some(Ok(m)) = Remote::check(self, &k)? {
                 out.push(m);
             }
@@ -116,7 +116,7 @@ impl Backend for Remote {
     /// Every blob downloaded and hashed: what a reader would get.
     fn verify(&self, _: &Store) -> Result<Vec<(String, String)>> {
         let mut bad = Vec::new();
-        for k in Remote::keys(self)? {
+        for k in crate::log::progress::counted(Remote::keys(self)?, "artifacts downloaded and re-hashed") {
             match Remote::check(self, &k)? {
                 Some(Ok(m)) => {
                     for o in &m.outputs {
