@@ -13,6 +13,8 @@ pub enum ReportFormat {
     /// One self-contained page, `report.html`: sortable tables, figures inline, details
     /// folded, links to the rollouts and recordings.
     Html,
+    /// Every table as JSON (`returns.json`, ...: an array of objects, keys in column order).
+    Json,
 }
 
 #[derive(Debug, Args)]
@@ -42,8 +44,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let handle = store;
     let store = crate::report::Artifacts::read(&handle)?;
     let building = crate::log::progress::Activity::start("report: tables, intervals and figures");
-    let mut t = crate::report::build(&store)?;
-    if t.returns.height() == 0 {
+    let t = crate::report::build(&store)?;
+    if t.returns.is_empty() {
         bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
     }
     let mut comparisons = Vec::new();
@@ -62,25 +64,18 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         comparisons.extend(rows);
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
-    if matches!(args.format, ReportFormat::Csv | ReportFormat::Both) {
-        crate::report::write_csv(&mut t.returns, &args.out.join("returns.csv"))?;
-        crate::report::write_csv(&mut t.demos, &args.out.join("demos.csv"))?;
-        crate::report::write_csv(&mut t.accuracy, &args.out.join("reward_accuracy.csv"))?;
-        crate::report::write_csv(&mut crate::report::protocols_frame(&t.protocols)?, &args.out.join("protocols.csv"))?;
-        if !t.aggregate.is_empty() {
-            crate::report::write_csv(&mut crate::report::studies::aggregate_frame(&t.aggregate)?, &args.out.join("aggregate.csv"))?;
-            crate::report::write_csv(&mut crate::report::studies::improvement_frame(&t.improvement)?, &args.out.join("improvement.csv"))?;
-        }
-        if !comparisons.is_empty() {
-            let mut frame = crate::report::comparisons::comparison_frame(&comparisons)?;
-            crate::report::write_csv(&mut frame, &args.out.join("comparisons.csv"))?;
-        }
-        if !t.looks.is_empty() {
-            crate::report::write_csv(&mut crate::report::looks::frame(&t.looks)?, &args.out.join("looks.csv"))?;
-        }
-        if !t.clones.is_empty() {
-            crate::report::write_csv(&mut crate::report::clones::frame(&t.clones)?, &args.out.join("clones.csv"))?;
-        }
+    let mut files = t.files();
+    if !comparisons.is_empty() {
+        files.push(("comparisons", crate::log::table::Table::of(&comparisons)));
+    }
+    for (stem, table) in &files {
+        let (ext, text) = match args.format {
+            ReportFormat::Csv | ReportFormat::Both => ("csv", table.csv()),
+            ReportFormat::Json => ("json", table.json()),
+            ReportFormat::Md | ReportFormat::Html => continue,
+        };
+        let path = args.out.join(format!("{stem}.{ext}"));
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
     }
     let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"), args.figures)?;
     let notes = crate::report::notes(&store)?;

@@ -4,10 +4,8 @@
 //! filter decided. The true returns are measured for the reader; no stage decides on them.
 use std::collections::BTreeSet;
 
-use polars::prelude::*;
-
-use super::{Artifacts, pe};
-use crate::error::Result;
+use super::Artifacts;
+use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::idrex::clone::CloneRecord;
@@ -69,29 +67,47 @@ pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
 }
 
 /// `clones.csv`: one row per clone.
-pub fn frame(rows: &[CloneRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&CloneRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&CloneRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    let o = |f: &dyn Fn(&CloneRow) -> Option<f64>| -> Vec<Option<f64>> { rows.iter().map(f).collect() };
-    let fid = |r: &CloneRow| r.record.fidelity.normalised;
-    DataFrame::new_infer_height(vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("pipeline".into(), s(&|r| r.pipeline.clone())),
-        Column::new("node".into(), s(&|r| r.node.clone())),
-        Column::new("clone".into(), rows.iter().map(|r| r.record.clone as u64).collect::<Vec<_>>()),
-        Column::new("source_step".into(), rows.iter().map(|r| r.record.source_step.map(|s| s as u64)).collect::<Vec<_>>()),
-        Column::new("source_return".into(), x(&CloneRow::source_return)),
-        Column::new("source_length".into(), x(&|r| mean_len(&r.record.fidelity.source_lengths))),
-        Column::new("clone_return".into(), x(&CloneRow::clone_return)),
-        Column::new("clone_length".into(), x(&|r| mean_len(&r.record.fidelity.clone_lengths))),
-        Column::new("fidelity".into(), o(&|r| Some(fid(r)).filter(|f| f.is_finite()))),
-        Column::new("length_ratio".into(), x(&|r| r.record.fidelity.length_ratio)),
-        Column::new("bc_val_loss".into(), o(&|r| Some(r.record.bc.val_loss).filter(|v| v.is_finite()))),
-        Column::new("bc_best_iteration".into(), rows.iter().map(|r| r.record.bc.best_iteration.map(|i| i as u64)).collect::<Vec<_>>()),
-        Column::new("filter_score".into(), o(&|r| r.record.score)),
-        Column::new("kept".into(), rows.iter().map(|r| r.record.kept).collect::<Vec<_>>()),
-    ])
-    .map_err(pe)
+impl Row for CloneRow {
+    fn header() -> Vec<&'static str> {
+        vec![
+            "env",
+            "pipeline",
+            "node",
+            "clone",
+            "source_step",
+            "source_return",
+            "source_length",
+            "clone_return",
+            "clone_length",
+            "fidelity",
+            "length_ratio",
+            "bc_val_loss",
+            "bc_best_iteration",
+            "filter_score",
+            "kept",
+        ]
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let f = &self.record.fidelity;
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.node),
+            Cell::int(self.record.clone),
+            Cell::Int(self.record.source_step.map(|s| s as u64)),
+            Cell::num(self.source_return()),
+            Cell::num(mean_len(&f.source_lengths)),
+            Cell::num(self.clone_return()),
+            Cell::num(mean_len(&f.clone_lengths)),
+            Cell::opt(Some(f.normalised), 2),
+            Cell::opt(Some(f.length_ratio), 2),
+            Cell::opt(Some(self.record.bc.val_loss), 4),
+            Cell::Int(self.record.bc.best_iteration.map(|i| i as u64)),
+            Cell::opt(self.record.score, 2),
+            Cell::Flag(self.record.kept),
+        ]
+    }
 }
 
 /// The section of `report.md`, empty without clones.
@@ -100,27 +116,36 @@ pub fn markdown(rows: &[CloneRow]) -> String {
         return String::new();
     }
     let mut out = String::from(
-        "\n## Multi-BC clones against their sources (true return of noise-free episodes; fidelity: uniform-random 0, the source's episodes 1; for the reader only, no stage reads it)\n\n| env | pipeline | clone | source return (length) | clone return (length) | fidelity | BC val loss (best iteration) | filter score | kept |\n|---|---|---|---|---|---|---|---|---|\n",
+        "\n## Multi-BC clones against their sources (true return of noise-free episodes; fidelity: uniform-random 0, the source's episodes 1; for the reader only, no stage reads it)\n\n",
     );
+    let columns = [
+        "env",
+        "pipeline",
+        "clone",
+        "source return (length)",
+        "clone return (length)",
+        "fidelity",
+        "BC val loss (best iteration)",
+        "filter score",
+        "kept",
+    ];
+    let mut table = Table { columns: columns.map(String::from).to_vec(), rows: vec![] };
     for r in rows {
         let f = &r.record.fidelity;
         let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.2}"));
-        out.push_str(&format!(
-            "| {} | {} | {} | {:.1} ({:.0}) | {:.1} ({:.0}) | {} | {:.4} ({}) | {} | {} |\n",
-            r.env,
-            r.pipeline,
-            r.record.clone,
-            r.source_return(),
-            mean_len(&f.source_lengths),
-            r.clone_return(),
-            mean_len(&f.clone_lengths),
-            opt(Some(f.normalised).filter(|x| x.is_finite())),
-            r.record.bc.val_loss,
-            r.record.bc.best_iteration.map_or("-".into(), |i| i.to_string()),
-            opt(r.record.score),
-            if r.record.kept { "yes" } else { "no" },
-        ));
+        table.rows.push(vec![
+            Cell::text(&r.env),
+            Cell::text(&r.pipeline),
+            Cell::int(r.record.clone),
+            Cell::Text(format!("{:.1} ({:.0})", r.source_return(), mean_len(&f.source_lengths))),
+            Cell::Text(format!("{:.1} ({:.0})", r.clone_return(), mean_len(&f.clone_lengths))),
+            Cell::Text(opt(Some(f.normalised).filter(|x| x.is_finite()))),
+            Cell::Text(format!("{:.4} ({})", r.record.bc.val_loss, r.record.bc.best_iteration.map_or("-".into(), |i| i.to_string()))),
+            Cell::Text(opt(r.record.score)),
+            Cell::Flag(r.record.kept),
+        ]);
     }
+    out.push_str(&table.markdown());
     let kept = rows.iter().filter(|r| r.record.kept).count();
     out.push_str(&format!("\nThe filter kept {kept} of {} clones.\n", rows.len()));
     out

@@ -1,11 +1,9 @@
 //! One method in two studies compared over their shared replicates: `idrex report --compare
 //! STUDY:BASELINE`.
-use polars::prelude::*;
-
-use super::improvement::{LEGEND, improvement_cell, improvement_columns};
+use super::improvement::{LEGEND, improvement_cell};
 use super::studies::{AggregateRow, paired};
-use super::{Protocol, RESAMPLES, num, pe};
-use crate::error::Result;
+use super::{Protocol, RESAMPLES};
+use crate::log::table::{Cell, Row, Table};
 use crate::stats::{Improvement, mean};
 
 /// One method in two studies over the replicates both ran (`idrex report --compare
@@ -56,20 +54,26 @@ pub fn compare(rows: &[AggregateRow], study: &str, baseline: &str) -> Vec<Compar
 }
 
 /// `comparisons.csv`: one row per (env, protocol, method, study, baseline).
-pub fn comparison_frame(rows: &[ComparisonRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&ComparisonRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&ComparisonRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    let mut columns = vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
-        Column::new("method".into(), s(&|r| r.method.clone())),
-        Column::new("study".into(), s(&|r| r.study.clone())),
-        Column::new("baseline".into(), s(&|r| r.baseline.clone())),
-        Column::new("study_mean".into(), x(&|r| r.study_mean)),
-        Column::new("baseline_mean".into(), x(&|r| r.baseline_mean)),
-    ];
-    columns.extend(improvement_columns(&rows.iter().map(|r| r.improvement).collect::<Vec<_>>()));
-    DataFrame::new_infer_height(columns).map_err(pe)
+impl Row for ComparisonRow {
+    fn header() -> Vec<&'static str> {
+        let mut h = vec!["env", "protocol", "method", "study", "baseline", "study_mean", "baseline_mean"];
+        h.extend(super::improvement::COLUMNS);
+        h
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let mut c = vec![
+            Cell::text(&self.env),
+            Cell::text(self.protocol.name()),
+            Cell::text(&self.method),
+            Cell::text(&self.study),
+            Cell::text(&self.baseline),
+            Cell::num(self.study_mean),
+            Cell::num(self.baseline_mean),
+        ];
+        c.extend(super::improvement::cells(&self.improvement));
+        c
+    }
 }
 
 /// The comparisons' section of `report.md`.
@@ -77,23 +81,22 @@ pub fn comparison_markdown(rows: &[ComparisonRow]) -> String {
     if rows.is_empty() {
         return String::new();
     }
-    let mut out = String::from(
-        "\n## Studies against each other (paired by replicate)\n\n| env | protocol | method | study | baseline | replicates | study mean | baseline mean | study against baseline |\n|---|---|---|---|---|---|---|---|---|\n",
-    );
-    for r in rows {
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            r.env,
-            r.protocol.name(),
-            r.method,
-            r.study,
-            r.baseline,
-            r.replicates,
-            num(Some(r.study_mean)),
-            num(Some(r.baseline_mean)),
-            improvement_cell(&r.improvement)
-        ));
-    }
+    let mut out = String::from("\n## Studies against each other (paired by replicate)\n\n");
+    let columns = ["env", "protocol", "method", "study", "baseline", "replicates", "study mean", "baseline mean", "study against baseline"];
+    let rows = rows.iter().map(|r| {
+        vec![
+            Cell::text(&r.env),
+            Cell::text(r.protocol.name()),
+            Cell::text(&r.method),
+            Cell::text(&r.study),
+            Cell::text(&r.baseline),
+            Cell::int(r.replicates),
+            Cell::num(r.study_mean),
+            Cell::num(r.baseline_mean),
+            Cell::Text(improvement_cell(&r.improvement)),
+        ]
+    });
+    out.push_str(&Table { columns: columns.map(String::from).to_vec(), rows: rows.collect() }.markdown());
     out.push_str(LEGEND);
     out
 }
@@ -127,7 +130,7 @@ mod tests {
         assert!(compare(&agg, "new", "missing").is_empty());
         let md = comparison_markdown(&[c.clone()]);
         assert!(md.contains("| Hopper-v5 | final | drex | new | old | 3 | 6.3 | 3.3 | P 0.78 ["), "{md}");
-        assert_eq!(comparison_frame(&[c.clone()]).unwrap().height(), 1);
+        assert_eq!(Table::of(&[c.clone()]).csv().lines().count(), 2);
         assert!(md.contains("2 of 3 [") && md.contains("⚠ only 3 replicates"), "{md}");
     }
 }

@@ -1,7 +1,6 @@
 //! Two methods compared over replicates ([`Improvement`]): the cell, the CSV columns and the
 //! legend that every comparison table shares.
-use polars::prelude::*;
-
+use crate::log::table::Cell;
 use crate::stats::Improvement;
 
 /// Under every table with comparisons: what its two forms mean.
@@ -26,21 +25,35 @@ pub fn improvement_cell(i: &Improvement) -> String {
     )
 }
 
-/// The CSV columns of a list of comparisons, both forms, each named.
-pub fn improvement_columns(rows: &[Improvement]) -> Vec<Column> {
-    let x = |f: &dyn Fn(&Improvement) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    let n = |f: &dyn Fn(&Improvement) -> usize| -> Vec<u64> { rows.iter().map(|r| f(r) as u64).collect() };
+/// The CSV columns of a comparison, both forms, each named.
+pub const COLUMNS: [&str; 11] = [
+    "replicates",
+    "rliable_probability",
+    "rliable_ci_low",
+    "rliable_ci_high",
+    "paired_wins",
+    "paired_ties",
+    "paired_rate",
+    "paired_ci_low",
+    "paired_ci_high",
+    "sign_test_p",
+    "warning",
+];
+
+/// One comparison's cells under [`COLUMNS`].
+pub fn cells(i: &Improvement) -> Vec<Cell> {
+    let x = |v: f64| Cell::opt(Some(v), 3);
     vec![
-        Column::new("replicates".into(), n(&|r| r.pairs)),
-        Column::new("rliable_probability".into(), x(&|r| r.unpaired)),
-        Column::new("rliable_ci_low".into(), x(&|r| r.unpaired_ci.0)),
-        Column::new("rliable_ci_high".into(), x(&|r| r.unpaired_ci.1)),
-        Column::new("paired_wins".into(), n(&|r| r.wins)),
-        Column::new("paired_ties".into(), n(&|r| r.ties)),
-        Column::new("paired_rate".into(), x(&|r| r.paired())),
-        Column::new("paired_ci_low".into(), x(&|r| r.paired_ci.0)),
-        Column::new("paired_ci_high".into(), x(&|r| r.paired_ci.1)),
-        Column::new("sign_test_p".into(), x(&|r| r.sign_p)),
-        Column::new("warning".into(), rows.iter().map(|r| r.warning().unwrap_or_default()).collect::<Vec<String>>()),
+        Cell::int(i.pairs),
+        x(i.unpaired),
+        x(i.unpaired_ci.0),
+        x(i.unpaired_ci.1),
+        Cell::int(i.wins),
+        Cell::int(i.ties),
+        x(i.paired()),
+        x(i.paired_ci.0),
+        x(i.paired_ci.1),
+        x(i.sign_p),
+        Cell::text(i.warning().unwrap_or_default()),
     ]
 }

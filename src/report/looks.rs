@@ -3,10 +3,8 @@
 //! test set or reused one ([`crate::pipeline::test_set`]).
 use std::collections::BTreeSet;
 
-use polars::prelude::*;
-
-use super::{Artifacts, pe};
-use crate::error::Result;
+use super::Artifacts;
+use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::test_set::{Look, Looks};
 use crate::store::{Manifest, TestSetMark};
 
@@ -57,31 +55,26 @@ pub fn markdown(rows: &[LookRow]) -> String {
     }
     let mut out = String::from(
         "\n## How often these seeds were looked at\n\nPer study, the configurations the store evaluated on its seeds (per seed and \
-         method, the distinct policies scored). A result is a clean test only where that is 1 and no choice was made from it.\n\n\
-         | env | study | configurations on its seeds | what it means |\n|---|---|---|---|\n",
+         method, the distinct policies scored). A result is a clean test only where that is 1 and no choice was made from it.\n\n",
     );
-    for r in rows {
-        out.push_str(&format!("| {} | {} | {} | {} |\n", r.env, r.study, r.configurations, r.verdict()));
-    }
+    let columns = ["env", "study", "configurations on its seeds", "what it means"].map(String::from).to_vec();
+    let rows = rows.iter().map(|r| vec![Cell::text(&r.env), Cell::text(&r.study), Cell::int(r.configurations), Cell::text(r.verdict())]);
+    out.push_str(&Table { columns, rows: rows.collect() }.markdown());
     out
 }
 
 /// `looks.csv`.
-pub fn frame(rows: &[LookRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&LookRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    DataFrame::new_infer_height(vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("study".into(), s(&|r| r.study.clone())),
-        Column::new("configurations".into(), rows.iter().map(|r| r.configurations as u64).collect::<Vec<_>>()),
-        Column::new(
-            "role".into(),
-            s(&|r| match &r.mark {
-                Some(TestSetMark::Test { .. }) => "test".into(),
-                Some(TestSetMark::Reuse { .. }) => "reuses-test-set".into(),
-                None => "study".into(),
-            }),
-        ),
-        Column::new("verdict".into(), s(&|r| r.verdict())),
-    ])
-    .map_err(pe)
+impl Row for LookRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "study", "configurations", "role", "verdict"]
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let role = match &self.mark {
+            Some(TestSetMark::Test { .. }) => "test",
+            Some(TestSetMark::Reuse { .. }) => "reuses-test-set",
+            None => "study",
+        };
+        vec![Cell::text(&self.env), Cell::text(&self.study), Cell::int(self.configurations), Cell::text(role), Cell::text(self.verdict())]
+    }
 }

@@ -16,6 +16,7 @@ pub mod improvement;
 pub mod looks;
 mod notes;
 mod protocols;
+mod returns;
 pub mod studies;
 #[cfg(test)]
 mod tests;
@@ -24,6 +25,7 @@ use polars::prelude::*;
 
 use crate::algo::scoring::CheckpointEval;
 use crate::error::{Error, Result};
+use crate::log::table::Table;
 use crate::pipeline::Method;
 use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::stats::spearman;
@@ -33,8 +35,9 @@ pub use crate::algo::scoring::{Selection, select};
 use crate::pipeline::role::Role;
 pub use notes::notes;
 use protocols::RESAMPLES;
-pub use protocols::{Protocol, ProtocolRow, protocols_frame};
-use protocols::{RunEval, protocol_rows, protocols_markdown};
+pub use protocols::{Protocol, ProtocolRow};
+use protocols::{RunEval, protocol_rows};
+pub use returns::{AccuracyRow, DemoRow, ReturnRow, markdown};
 
 pub(crate) fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
@@ -47,7 +50,7 @@ pub fn method_label(method: Method, iteration: usize) -> String {
 
 /// A table of the report: one pipeline's runs, or one replicate's of a study.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
-struct Table {
+struct TableId {
     label: String,
     study: String,
     replicate: usize,
@@ -60,7 +63,7 @@ struct Long {
     demos: DataFrame,
     accuracy: DataFrame,
     /// (env, table, method label) -> its evaluated runs.
-    runs: BTreeMap<(String, Table, String), Vec<RunEval>>,
+    runs: BTreeMap<(String, TableId, String), Vec<RunEval>>,
     /// (env, table label) -> the demonstrations' returns.
     demo_returns: BTreeMap<(String, String), Vec<f64>>,
 }
@@ -107,9 +110,9 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
     let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
     let mut demo_keys = std::collections::BTreeSet::new();
-    let mut runs: BTreeMap<(String, Table, String), Vec<RunEval>> = BTreeMap::new();
+    let mut runs: BTreeMap<(String, TableId, String), Vec<RunEval>> = BTreeMap::new();
     let mut demo_returns: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
-    let mut seen: BTreeMap<(String, Table, String, usize), String> = BTreeMap::new();
+    let mut seen: BTreeMap<(String, TableId, String, usize), String> = BTreeMap::new();
     // (env, study) -> where each of its tables' demonstrations came from.
     let mut demo_sources: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
     for m in store.iter() {
@@ -126,7 +129,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
         };
         let e = p.env.name().to_string();
         let label = method_label(p.method, p.iteration);
-        let table = Table { label: p.table(), study: p.pipeline.clone(), replicate: p.replicate };
+        let table = TableId { label: p.table(), study: p.pipeline.clone(), replicate: p.replicate };
         for &r in &x.summary.returns {
             env.push(e.clone());
             method.push(label.clone());
@@ -211,15 +214,15 @@ fn collect(store: &Artifacts) -> Result<Long> {
     })
 }
 
-/// The tables: returns and reward accuracy per (env, pipeline, method).
+/// The report's typed rows, every table of it (CSV, markdown, HTML and figures read these).
 pub struct Tables {
-    pub returns: DataFrame,
+    pub returns: Vec<ReturnRow>,
     /// One row per (env, pipeline, method, protocol).
     pub protocols: Vec<ProtocolRow>,
     /// (env, pipeline, method, run) of every evaluated run, to name missing runs.
-    pub runs: DataFrame,
-    pub demos: DataFrame,
-    pub accuracy: DataFrame,
+    pub evaluated: std::collections::BTreeSet<(String, String, String, usize)>,
+    pub demos: Vec<DemoRow>,
+    pub accuracy: Vec<AccuracyRow>,
     /// Studies with several replicates: one row per (env, study, method, protocol).
     pub aggregate: Vec<studies::AggregateRow>,
     /// Their probabilities of improvement over D-REX and over BC.
@@ -230,6 +233,30 @@ pub struct Tables {
     pub demo_returns: BTreeMap<(String, String), Vec<f64>>,
     /// How often each study's seeds were looked at.
     pub looks: Vec<looks::LookRow>,
+}
+
+impl Tables {
+    /// Every table the report writes as a file, by file stem (`returns` -> `returns.csv`);
+    /// the studies', looks' and clones' only where the store has any.
+    pub fn files(&self) -> Vec<(&'static str, Table)> {
+        let mut out = vec![
+            ("returns", Table::of(&self.returns)),
+            ("demos", Table::of(&self.demos)),
+            ("reward_accuracy", Table::of(&self.accuracy)),
+            ("protocols", Table::of(&self.protocols)),
+        ];
+        if !self.aggregate.is_empty() {
+            out.push(("aggregate", Table::of(&self.aggregate)));
+            out.push(("improvement", Table::of(&self.improvement)));
+        }
+        if !self.looks.is_empty() {
+            out.push(("looks", Table::of(&self.looks)));
+        }
+        if !self.clones.is_empty() {
+            out.push(("clones", Table::of(&self.clones)));
+        }
+        out
+    }
 }
 
 pub fn build(store: &Artifacts) -> Result<Tables> {
@@ -288,12 +315,48 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         .sort(["env", "pipeline", "method"], Default::default())
         .collect()
         .map_err(pe)?;
+    // polars' aggregates, read into typed rows once; everything downstream reads the rows.
+    let f = |df: &DataFrame, c: &str, i: usize| cell_f(df, c, i).unwrap_or(f64::NAN);
+    let n = |df: &DataFrame, c: &str, i: usize| cell_f(df, c, i).unwrap_or(0.0) as usize;
+    let s = cell_s;
     Ok(Tables {
-        returns,
+        returns: (0..returns.height())
+            .map(|i| ReturnRow {
+                env: s(&returns, "env", i),
+                pipeline: s(&returns, "pipeline", i),
+                method: s(&returns, "method", i),
+                mean: f(&returns, "mean", i),
+                std: f(&returns, "std", i),
+                episodes: n(&returns, "episodes", i),
+                best_run_avg: f(&returns, "best_run_avg", i),
+                runs: n(&returns, "runs", i),
+            })
+            .collect(),
+        evaluated: (0..runs.height())
+            .map(|i| (s(&runs, "env", i), s(&runs, "pipeline", i), s(&runs, "method", i), n(&runs, "run", i)))
+            .collect(),
+        demos: (0..demos.height())
+            .map(|i| DemoRow {
+                env: s(&demos, "env", i),
+                pipeline: s(&demos, "pipeline", i),
+                demos_avg: f(&demos, "demos_avg", i),
+                demos_best: f(&demos, "demos_best", i),
+                demos: n(&demos, "demos", i),
+            })
+            .collect(),
+        accuracy: (0..accuracy.height())
+            .map(|i| AccuracyRow {
+                env: s(&accuracy, "env", i),
+                pipeline: s(&accuracy, "pipeline", i),
+                method: s(&accuracy, "method", i),
+                pearson: f(&accuracy, "pearson", i),
+                spearman: f(&accuracy, "spearman", i),
+                pairwise_accuracy: f(&accuracy, "pairwise_accuracy", i),
+                spearman_over_checkpoints: f(&accuracy, "spearman_over_checkpoints", i),
+                runs: n(&accuracy, "runs", i),
+            })
+            .collect(),
         protocols,
-        runs,
-        demos,
-        accuracy,
         aggregate,
         improvement,
         clones: clones::rows(store),
@@ -315,97 +378,4 @@ fn cell_f(df: &DataFrame, name: &str, i: usize) -> Option<f64> {
 }
 fn cell_s(df: &DataFrame, name: &str, i: usize) -> String {
     df.column(name).ok().and_then(|c| c.str().ok().and_then(|s| s.get(i).map(str::to_string))).unwrap_or_default()
-}
-
-/// The paper-style markdown, the answer first: one row per (env, pipeline).
-pub fn markdown(t: &Tables) -> String {
-    let mut out = answer::markdown(&t.protocols, &t.aggregate, &t.demo_returns, &t.looks);
-    out.push_str(&looks::markdown(&t.looks));
-    out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
-    out.push_str("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
-    out.push_str("| env | pipeline | demos avg | demos best | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|---|---|\n");
-    let mut rows: Vec<(String, String)> =
-        (0..t.returns.height()).map(|i| (cell_s(&t.returns, "env", i), cell_s(&t.returns, "pipeline", i))).collect();
-    rows.dedup();
-    for (env, pipe) in &rows {
-        let demo_row = (0..t.demos.height()).find(|&i| &cell_s(&t.demos, "env", i) == env && &cell_s(&t.demos, "pipeline", i) == pipe);
-        let f = |x: Option<f64>| x.map_or("missing".to_string(), |v| num(Some(v)));
-        out.push_str(&format!(
-            "| {env} | {pipe} | {} | {} |",
-            f(demo_row.and_then(|i| cell_f(&t.demos, "demos_avg", i))),
-            f(demo_row.and_then(|i| cell_f(&t.demos, "demos_best", i)))
-        ));
-        for m in Method::ALL.map(Method::name) {
-            let i = (0..t.returns.height()).find(|&i| {
-                &cell_s(&t.returns, "env", i) == env && &cell_s(&t.returns, "pipeline", i) == pipe && cell_s(&t.returns, "method", i) == m
-            });
-            let cell = match i {
-                None => " missing |".to_string(),
-                Some(i) => {
-                    let runs = cell_f(&t.returns, "runs", i).unwrap_or(0.0);
-                    // Runs that other methods of this pipeline have and this one lacks.
-                    let seen = |method: Option<&str>| -> std::collections::BTreeSet<i64> {
-                        (0..t.runs.height())
-                            .filter(|&j| &cell_s(&t.runs, "env", j) == env && &cell_s(&t.runs, "pipeline", j) == pipe)
-                            .filter(|&j| {
-                                method.is_none_or(|m| cell_s(&t.runs, "method", j) == m)
-                                    && cell_s(&t.runs, "method", j) != Method::Bc.name()
-                            })
-                            .filter_map(|j| cell_f(&t.runs, "run", j).map(|r| r as i64))
-                            .collect()
-                    };
-                    let missing: Vec<String> = seen(None).difference(&seen(Some(m))).map(|r| r.to_string()).collect();
-                    let missing = if m == Method::Bc.name() || missing.is_empty() {
-                        String::new()
-                    } else {
-                        format!("; run {} missing", missing.join(", "))
-                    };
-                    let episodes = cell_f(&t.returns, "episodes", i).unwrap_or(0.0);
-                    format!(
-                        " {} ± {} ({}{}{missing}) |",
-                        num(cell_f(&t.returns, "mean", i)),
-                        num(cell_f(&t.returns, "std", i)),
-                        num(cell_f(&t.returns, "best_run_avg", i)),
-                        if m == Method::Bc.name() {
-                            format!(", {episodes:.0} episodes")
-                        } else {
-                            format!(", {runs:.0} runs, {episodes:.0} episodes")
-                        }
-                    )
-                }
-            };
-            out.push_str(&cell);
-        }
-        out.push('\n');
-    }
-    out.push_str(concat!(
-        "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
-        "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
-        "Over checkpoints: Spearman correlation of learned and true return across each PPO run's checkpoints ",
-        "(does climbing the learned reward climb the true one?).\n\n",
-        "| env | pipeline | method | Pearson | Spearman | pairwise accuracy | Spearman over checkpoints | runs |\n",
-        "|---|---|---|---|---|---|---|---|\n"
-    ));
-    for i in 0..t.accuracy.height() {
-        let g = |c: &str| cell_f(&t.accuracy, c, i).filter(|v| v.is_finite()).map_or("n/a".into(), |v| format!("{v:.3}"));
-        out.push_str(&format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
-            cell_s(&t.accuracy, "env", i),
-            cell_s(&t.accuracy, "pipeline", i),
-            cell_s(&t.accuracy, "method", i),
-            g("pearson"),
-            g("spearman"),
-            g("pairwise_accuracy"),
-            g("spearman_over_checkpoints"),
-            cell_f(&t.accuracy, "runs", i).unwrap_or(0.0)
-        ));
-    }
-    out.push_str(&protocols_markdown(&t.protocols));
-    out.push_str(&clones::markdown(&t.clones));
-    out
-}
-
-pub fn write_csv(df: &mut DataFrame, path: &std::path::Path) -> Result<()> {
-    let mut f = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    CsvWriter::new(&mut f).finish(df).map_err(pe)
 }

@@ -1,11 +1,9 @@
 //! The three protocols ([`Protocol`]) a PPO method's return is reported under: which policy
 //! of each run is measured, each cell with its bootstrap interval over runs; their markdown
 //! tables and CSV.
-use polars::prelude::*;
-
-use super::{Table, num, pe};
+use super::{TableId, num};
 use crate::algo::scoring::{CheckpointEval, select};
-use crate::error::Result;
+use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::Method;
 use crate::stats::{ReturnStats, bootstrap_ci};
 
@@ -76,7 +74,7 @@ pub struct ProtocolRow {
 }
 
 /// The three protocols' rows of one (env, pipeline, method).
-pub(super) fn protocol_rows(env: &str, table: &Table, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
+pub(super) fn protocol_rows(env: &str, table: &TableId, method: &str, runs: &[RunEval]) -> Vec<ProtocolRow> {
     let row = |protocol, step: Option<usize>, per_run: Vec<Vec<f64>>| {
         let pooled: Vec<f64> = per_run.iter().flatten().copied().collect();
         let run_means: Vec<f64> = per_run.iter().map(|r| ReturnStats::of(r).mean).collect();
@@ -121,6 +119,11 @@ pub(super) fn protocol_rows(env: &str, table: &Table, method: &str, runs: &[RunE
     out
 }
 
+/// The paper's column headings after `env` and `pipeline`: one per method.
+pub(super) fn method_columns(first: &[&str]) -> Vec<String> {
+    first.iter().map(|c| c.to_string()).chain(Method::ALL.iter().map(|m| m.label().to_string())).collect()
+}
+
 /// One table per protocol, in the paper's layout; each cell: mean ± std over runs x
 /// episodes, the 95 % bootstrap interval of the mean over runs, the checkpoint's step.
 pub(super) fn protocols_markdown(rows: &[ProtocolRow]) -> String {
@@ -130,47 +133,50 @@ pub(super) fn protocols_markdown(rows: &[ProtocolRow]) -> String {
     let mut groups: Vec<(&str, &str)> = rows.iter().map(|r| (r.env.as_str(), r.pipeline.as_str())).collect();
     groups.dedup();
     for protocol in Protocol::ALL {
-        out.push_str(&format!(
-            "\n### {}\n\n| env | pipeline | BC | D-REX | iD-REX interp. | iD-REX action noise | iD-REX multi-BC |\n|---|---|---|---|---|---|---|\n",
-            protocol.title()
-        ));
+        out.push_str(&format!("\n### {}\n\n", protocol.title()));
+        let mut table = Table { columns: method_columns(&["env", "pipeline"]), rows: vec![] };
         for (env, pipeline) in &groups {
-            out.push_str(&format!("| {env} | {pipeline} |"));
+            let mut row = vec![Cell::text(*env), Cell::text(*pipeline)];
             for m in Method::ALL {
                 let cell = rows.iter().find(|r| r.env == *env && r.pipeline == *pipeline && r.method == m.name() && r.protocol == protocol);
-                out.push_str(&match cell {
-                    None => " missing |".to_string(),
+                row.push(Cell::Text(match cell {
+                    None => "missing".to_string(),
                     Some(r) => {
                         let step = r.step.map_or(String::new(), |s| format!(" @{s}"));
                         let gap = r.gap_to_best.map_or(String::new(), |g| format!("; {} below the best", num(Some(g))));
                         let [mean, std, lo, hi] = [r.stats.mean, r.stats.std, r.ci.0, r.ci.1].map(|x| num(Some(x)));
-                        format!(" {mean} ± {std} [{lo}, {hi}]{step}{gap} |")
+                        format!("{mean} ± {std} [{lo}, {hi}]{step}{gap}")
                     }
-                });
+                }));
             }
-            out.push('\n');
+            table.rows.push(row);
         }
+        out.push_str(&table.markdown());
     }
     out
 }
 
-/// The protocol rows as a table (`protocols.csv`).
-pub fn protocols_frame(rows: &[ProtocolRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&ProtocolRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&ProtocolRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    DataFrame::new_infer_height(vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("pipeline".into(), s(&|r| r.pipeline.clone())),
-        Column::new("method".into(), s(&|r| r.method.clone())),
-        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
-        Column::new("step".into(), rows.iter().map(|r| r.step.map(|v| v as u64)).collect::<Vec<_>>()),
-        Column::new("mean".into(), x(&|r| r.stats.mean)),
-        Column::new("std".into(), x(&|r| r.stats.std)),
-        Column::new("episodes".into(), rows.iter().map(|r| r.stats.episodes as u64).collect::<Vec<_>>()),
-        Column::new("runs".into(), rows.iter().map(|r| r.runs as u64).collect::<Vec<_>>()),
-        Column::new("ci_low".into(), x(&|r| r.ci.0)),
-        Column::new("ci_high".into(), x(&|r| r.ci.1)),
-        Column::new("gap_to_best".into(), rows.iter().map(|r| r.gap_to_best).collect::<Vec<_>>()),
-    ])
-    .map_err(pe)
+/// `protocols.csv`: one row per (env, pipeline, method, protocol).
+impl Row for ProtocolRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "pipeline", "method", "protocol", "step", "mean", "std", "episodes", "runs", "ci_low", "ci_high", "gap_to_best"]
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let x = |v: f64| Cell::opt(Some(v), 1);
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.method),
+            Cell::text(self.protocol.name()),
+            Cell::Int(self.step.map(|s| s as u64)),
+            x(self.stats.mean),
+            x(self.stats.std),
+            Cell::int(self.stats.episodes),
+            Cell::int(self.runs),
+            x(self.ci.0),
+            x(self.ci.1),
+            Cell::opt(self.gap_to_best, 1),
+        ]
+    }
 }

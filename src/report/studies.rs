@@ -9,10 +9,8 @@
 //! average and best, and each method's probability of improvement over D-REX and over BC.
 use std::collections::BTreeMap;
 
-use polars::prelude::*;
-
-use super::{Protocol, ProtocolRow, RESAMPLES, num, pe};
-use crate::error::Result;
+use super::{Protocol, ProtocolRow, RESAMPLES, num};
+use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::Method;
 use crate::stats::{Improvement, WinCount, hierarchical_ci, iqm, mean, median};
 
@@ -129,45 +127,77 @@ pub(super) fn paired(a: &AggregateRow, b: &AggregateRow) -> Vec<(f64, f64)> {
 }
 
 /// `aggregate.csv`: one row per (env, study, method, protocol).
-pub fn aggregate_frame(rows: &[AggregateRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&AggregateRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let x = |f: &dyn Fn(&AggregateRow) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
-    DataFrame::new_infer_height(vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("study".into(), s(&|r| r.study.clone())),
-        Column::new("method".into(), s(&|r| r.method.clone())),
-        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
-        Column::new("replicates".into(), rows.iter().map(|r| r.replicates as u64).collect::<Vec<_>>()),
-        Column::new("runs".into(), rows.iter().map(|r| r.runs as u64).collect::<Vec<_>>()),
-        Column::new("mean".into(), x(&|r| r.mean)),
-        Column::new("mean_ci_low".into(), x(&|r| r.mean_ci.0)),
-        Column::new("mean_ci_high".into(), x(&|r| r.mean_ci.1)),
-        Column::new("iqm".into(), x(&|r| r.iqm)),
-        Column::new("iqm_ci_low".into(), x(&|r| r.iqm_ci.0)),
-        Column::new("iqm_ci_high".into(), x(&|r| r.iqm_ci.1)),
-        Column::new("median".into(), x(&|r| r.median)),
-        Column::new("above_demos_avg".into(), x(&|r| r.above_demos_avg.fraction())),
-        Column::new("above_demos_avg_sign_p".into(), x(&|r| r.above_demos_avg.sign_p())),
-        Column::new("above_demos_avg_rate_low".into(), x(&|r| r.above_demos_avg.lower())),
-        Column::new("above_demos_best".into(), x(&|r| r.above_demos_best.fraction())),
-        Column::new("above_demos_best_sign_p".into(), x(&|r| r.above_demos_best.sign_p())),
-        Column::new("above_demos_best_rate_low".into(), x(&|r| r.above_demos_best.lower())),
-    ])
-    .map_err(pe)
+impl Row for AggregateRow {
+    fn header() -> Vec<&'static str> {
+        vec![
+            "env",
+            "study",
+            "method",
+            "protocol",
+            "replicates",
+            "runs",
+            "mean",
+            "mean_ci_low",
+            "mean_ci_high",
+            "iqm",
+            "iqm_ci_low",
+            "iqm_ci_high",
+            "median",
+            "above_demos_avg",
+            "above_demos_avg_sign_p",
+            "above_demos_avg_rate_low",
+            "above_demos_best",
+            "above_demos_best_sign_p",
+            "above_demos_best_rate_low",
+        ]
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let x = |v: f64| Cell::opt(Some(v), 1);
+        let p = |v: f64| Cell::opt(Some(v), 3);
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.study),
+            Cell::text(&self.method),
+            Cell::text(self.protocol.name()),
+            Cell::int(self.replicates),
+            Cell::int(self.runs),
+            x(self.mean),
+            x(self.mean_ci.0),
+            x(self.mean_ci.1),
+            x(self.iqm),
+            x(self.iqm_ci.0),
+            x(self.iqm_ci.1),
+            x(self.median),
+            p(self.above_demos_avg.fraction()),
+            p(self.above_demos_avg.sign_p()),
+            p(self.above_demos_avg.lower()),
+            p(self.above_demos_best.fraction()),
+            p(self.above_demos_best.sign_p()),
+            p(self.above_demos_best.lower()),
+        ]
+    }
 }
 
 /// `improvement.csv`: one row per (env, study, protocol, method, baseline).
-pub fn improvement_frame(rows: &[ImprovementRow]) -> Result<DataFrame> {
-    let s = |f: &dyn Fn(&ImprovementRow) -> String| -> Vec<String> { rows.iter().map(f).collect() };
-    let mut columns = vec![
-        Column::new("env".into(), s(&|r| r.env.clone())),
-        Column::new("study".into(), s(&|r| r.study.clone())),
-        Column::new("protocol".into(), s(&|r| r.protocol.name().to_string())),
-        Column::new("method".into(), s(&|r| r.method.clone())),
-        Column::new("baseline".into(), s(&|r| r.baseline.clone())),
-    ];
-    columns.extend(super::improvement::improvement_columns(&rows.iter().map(|r| r.improvement).collect::<Vec<_>>()));
-    DataFrame::new_infer_height(columns).map_err(pe)
+impl Row for ImprovementRow {
+    fn header() -> Vec<&'static str> {
+        let mut h = vec!["env", "study", "protocol", "method", "baseline"];
+        h.extend(super::improvement::COLUMNS);
+        h
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let mut c = vec![
+            Cell::text(&self.env),
+            Cell::text(&self.study),
+            Cell::text(self.protocol.name()),
+            Cell::text(&self.method),
+            Cell::text(&self.baseline),
+        ];
+        c.extend(super::improvement::cells(&self.improvement));
+        c
+    }
 }
 
 /// The studies' section of `report.md`: per environment and protocol, every method's
@@ -183,10 +213,19 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
     groups.sort();
     groups.dedup();
     for (env, study, protocol) in groups {
-        out.push_str(&format!(
-            "\n### {env}, study `{study}`: {}\n\n| method | replicates (runs) | mean [95 % CI] | IQM [95 % CI] | median | above demos avg | above demos best | against D-REX | against BC |\n|---|---|---|---|---|---|---|---|---|\n",
-            protocol.title()
-        ));
+        out.push_str(&format!("\n### {env}, study `{study}`: {}\n\n", protocol.title()));
+        let columns = [
+            "method",
+            "replicates (runs)",
+            "mean [95 % CI]",
+            "IQM [95 % CI]",
+            "median",
+            "above demos avg",
+            "above demos best",
+            "against D-REX",
+            "against BC",
+        ];
+        let mut table = Table { columns: columns.map(String::from).to_vec(), rows: vec![] };
         for r in rows.iter().filter(|r| r.env == env && r.study == study && r.protocol == protocol) {
             let p = |baseline: &str| {
                 improvement
@@ -194,24 +233,24 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
                     .find(|i| i.env == env && i.study == study && i.protocol == protocol && i.method == r.method && i.baseline == baseline)
                     .map_or("-".to_string(), |i| super::improvement::improvement_cell(&i.improvement))
             };
-            out.push_str(&format!(
-                "| {} | {} ({}) | {} [{}, {}] | {} [{}, {}] | {} | {} | {} | {} | {} |\n",
-                r.method,
-                r.replicates,
-                r.runs,
-                num(Some(r.mean)),
-                num(Some(r.mean_ci.0)),
-                num(Some(r.mean_ci.1)),
-                num(Some(r.iqm)),
-                num(Some(r.iqm_ci.0)),
-                num(Some(r.iqm_ci.1)),
-                num(Some(r.median)),
-                r.above_demos_avg,
-                r.above_demos_best,
-                p(Method::Drex.name()),
-                p(Method::Bc.name()),
-            ));
+            let ci = |v: f64, (lo, hi): (f64, f64)| format!("{} [{}, {}]", num(Some(v)), num(Some(lo)), num(Some(hi)));
+            table.rows.push(
+                [
+                    r.method.clone(),
+                    format!("{} ({})", r.replicates, r.runs),
+                    ci(r.mean, r.mean_ci),
+                    ci(r.iqm, r.iqm_ci),
+                    num(Some(r.median)),
+                    r.above_demos_avg.to_string(),
+                    r.above_demos_best.to_string(),
+                    p(Method::Drex.name()),
+                    p(Method::Bc.name()),
+                ]
+                .map(Cell::Text)
+                .to_vec(),
+            );
         }
+        out.push_str(&table.markdown());
     }
     out.push_str(super::improvement::LEGEND);
     out
@@ -271,7 +310,7 @@ pub(super) mod tests {
         assert!(imp.iter().all(|i| i.method != i.baseline));
         let md = markdown(&agg, &imp);
         assert!(md.contains("| drex | 4 (8) | 5.5 [") && md.contains("study `s`"), "{md}");
-        let csv = aggregate_frame(&agg).unwrap();
-        assert_eq!(csv.height(), 2);
+        let csv = Table::of(&agg).csv();
+        assert_eq!(csv.lines().count(), 3, "a header and two rows: {csv}");
     }
 }

@@ -91,11 +91,23 @@ fn row<'a>(t: &'a Tables, pipeline: &str, method: &str, protocol: Protocol) -> &
 fn each_table_has_its_rows_and_numbers() {
     let t = build(&store()).unwrap();
     // One row per table and method, per table for the demonstrations.
-    assert_eq!(t.returns.height(), 4, "{}", t.returns);
-    assert_eq!(t.demos.height(), 2, "{}", t.demos);
-    let avg = t.demos.column("demos_avg").unwrap().f64().unwrap().to_vec();
-    assert_eq!(avg, vec![Some(1100.0), Some(1200.0)]);
-    assert_eq!(t.accuracy.height(), 2, "one row per table's D-REX: {}", t.accuracy);
+    assert_eq!(t.returns.len(), 4, "{:?}", t.returns);
+    let drex1 = t.returns.iter().find(|r| r.pipeline == "fixture/r1" && r.method == "drex").unwrap();
+    // Runs at 2100 ± 10 and 2300 ± 10: four episodes, the best run 2300.
+    assert_eq!((drex1.mean, drex1.episodes, drex1.runs, drex1.best_run_avg), (2200.0, 4, 2, 2300.0));
+    assert!((drex1.std - 10_100.0f64.sqrt()).abs() < 1e-9, "population std over runs x episodes: {}", drex1.std);
+    assert_eq!(t.demos.iter().map(|d| d.demos_avg).collect::<Vec<_>>(), vec![1100.0, 1200.0]);
+    assert_eq!(t.accuracy.len(), 2, "one row per table's D-REX: {:?}", t.accuracy);
+    assert_eq!((t.accuracy[0].pearson, t.accuracy[0].runs), (0.5, 2));
+    // Every file from the same rows: a header the readers know, one line per row.
+    let files = t.files();
+    let stems: Vec<&str> = files.iter().map(|f| f.0).collect();
+    assert_eq!(stems, ["returns", "demos", "reward_accuracy", "protocols", "aggregate", "improvement"]);
+    let returns = files[0].1.csv();
+    assert!(returns.starts_with("env,pipeline,method,mean,std,episodes,best_run_avg,runs\n"), "{returns}");
+    assert!(returns.contains("Hopper-v5,fixture/r1,drex,2200.0,"), "{returns}");
+    let json: serde_json::Value = serde_json::from_str(&files[3].1.json()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), t.protocols.len());
     // Per table (replicate 1 is `fixture/r1`), per method, per protocol.
     let final1 = row(&t, "fixture/r1", "drex", Protocol::Final);
     assert_eq!(final1.run_means, vec![2100.0, 2300.0]);
@@ -138,6 +150,7 @@ fn a_study_of_two_replicates_is_aggregated_over_them() {
     assert_eq!(imp.improvement.unpaired_ci, (1.0, 1.0));
     let md = markdown(&t);
     assert!(md.contains("## The answer") && md.contains("Hopper-v5, fixture (2 replicates)"), "{md}");
+    assert!(md.contains("| Hopper-v5 | fixture/r1 | 1100.0 | 1150.0 | 1000.0 ± 10.0 (1000.0, 2 episodes) | 2200.0 ± 100.5 (2300.0, 2 runs, 4 episodes) | missing |"), "{md}");
     assert!(md.contains("2 of 2") && md.contains("only 2 replicates"), "{md}");
 }
 

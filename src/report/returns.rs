@@ -1,0 +1,159 @@
+//! The per-pipeline tables: each method's true return over its runs' episodes, the
+//! demonstrations', and the learned reward's accuracy on the policies' own rollouts; their
+//! rows (`returns.csv`, `demos.csv`, `reward_accuracy.csv`) and the report's markdown, which
+//! puts the answer first.
+use super::protocols::{method_columns, protocols_markdown};
+use super::{Tables, answer, clones, looks, num, studies};
+use crate::log::table::{Cell, Row, Table};
+use crate::pipeline::Method;
+
+/// `returns.csv`: one (env, pipeline, method)'s true return over all its runs' episodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReturnRow {
+    pub env: String,
+    pub pipeline: String,
+    pub method: String,
+    pub mean: f64,
+    /// Over runs x episodes (population).
+    pub std: f64,
+    pub episodes: usize,
+    /// The best run's mean return (the paper's headline figure).
+    pub best_run_avg: f64,
+    pub runs: usize,
+}
+
+/// `demos.csv`: one table's demonstrations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DemoRow {
+    pub env: String,
+    pub pipeline: String,
+    pub demos_avg: f64,
+    pub demos_best: f64,
+    pub demos: usize,
+}
+
+/// `reward_accuracy.csv`: the learned reward on one (env, pipeline, method)'s evaluation
+/// rollouts, the mean over its runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AccuracyRow {
+    pub env: String,
+    pub pipeline: String,
+    pub method: String,
+    pub pearson: f64,
+    pub spearman: f64,
+    pub pairwise_accuracy: f64,
+    pub spearman_over_checkpoints: f64,
+    pub runs: usize,
+}
+
+impl Row for ReturnRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "pipeline", "method", "mean", "std", "episodes", "best_run_avg", "runs"]
+    }
+    fn cells(&self) -> Vec<Cell> {
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.method),
+            Cell::num(self.mean),
+            Cell::num(self.std),
+            Cell::int(self.episodes),
+            Cell::num(self.best_run_avg),
+            Cell::int(self.runs),
+        ]
+    }
+}
+
+impl Row for DemoRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "pipeline", "demos_avg", "demos_best", "demos"]
+    }
+    fn cells(&self) -> Vec<Cell> {
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::num(self.demos_avg),
+            Cell::num(self.demos_best),
+            Cell::int(self.demos),
+        ]
+    }
+}
+
+impl Row for AccuracyRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "runs"]
+    }
+    fn cells(&self) -> Vec<Cell> {
+        let x = |v: f64| Cell::opt(Some(v), 3);
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.method),
+            x(self.pearson),
+            x(self.spearman),
+            x(self.pairwise_accuracy),
+            x(self.spearman_over_checkpoints),
+            Cell::int(self.runs),
+        ]
+    }
+}
+
+/// The paper-style markdown, the answer first: one row per (env, pipeline).
+pub fn markdown(t: &Tables) -> String {
+    let mut out = answer::markdown(&t.protocols, &t.aggregate, &t.demo_returns, &t.looks);
+    out.push_str(&looks::markdown(&t.looks));
+    out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
+    out.push_str("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
+    let mut table = Table { columns: method_columns(&["env", "pipeline", "demos avg", "demos best"]), rows: vec![] };
+    let mut groups: Vec<(&str, &str)> = t.returns.iter().map(|r| (r.env.as_str(), r.pipeline.as_str())).collect();
+    groups.dedup();
+    for (env, pipe) in groups {
+        let demo = t.demos.iter().find(|d| d.env == env && d.pipeline == pipe);
+        let shown = |x: Option<f64>| Cell::Text(x.map_or("missing".to_string(), |v| num(Some(v))));
+        let mut row = vec![Cell::text(env), Cell::text(pipe), shown(demo.map(|d| d.demos_avg)), shown(demo.map(|d| d.demos_best))];
+        // Runs that the pipeline's learned-reward methods have, to name those one lacks.
+        let runs_of = |method: Option<&str>| -> std::collections::BTreeSet<usize> {
+            t.evaluated
+                .iter()
+                .filter(|(e, p, m, _)| e == env && p == pipe && m != Method::Bc.name() && method.is_none_or(|x| m == x))
+                .map(|x| x.3)
+                .collect()
+        };
+        for m in Method::ALL.map(Method::name) {
+            let cell = match t.returns.iter().find(|r| r.env == env && r.pipeline == pipe && r.method == m) {
+                None => "missing".to_string(),
+                Some(r) => {
+                    let missing: Vec<String> = runs_of(None).difference(&runs_of(Some(m))).map(|r| r.to_string()).collect();
+                    let missing = if m == Method::Bc.name() || missing.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; run {} missing", missing.join(", "))
+                    };
+                    let counts = if m == Method::Bc.name() {
+                        format!(", {} episodes", r.episodes)
+                    } else {
+                        format!(", {} runs, {} episodes", r.runs, r.episodes)
+                    };
+                    format!("{} ± {} ({}{counts}{missing})", num(Some(r.mean)), num(Some(r.std)), num(Some(r.best_run_avg)))
+                }
+            };
+            row.push(Cell::Text(cell));
+        }
+        table.rows.push(row);
+    }
+    out.push_str(&table.markdown());
+    out.push_str(concat!(
+        "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
+        "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
+        "Over checkpoints: Spearman correlation of learned and true return across each PPO run's checkpoints ",
+        "(does climbing the learned reward climb the true one?).\n\n",
+    ));
+    let mut accuracy = Table::of(&t.accuracy);
+    accuracy.columns = ["env", "pipeline", "method", "Pearson", "Spearman", "pairwise accuracy", "Spearman over checkpoints", "runs"]
+        .map(String::from)
+        .to_vec();
+    out.push_str(&accuracy.markdown());
+    out.push_str(&protocols_markdown(&t.protocols));
+    out.push_str(&clones::markdown(&t.clones));
+    out
+}
