@@ -8,6 +8,7 @@ mod docs;
 mod env_cli;
 mod env_equivalence;
 mod exp;
+mod fuzz;
 mod layout;
 mod pipeline;
 mod recording;

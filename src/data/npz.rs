@@ -61,9 +61,13 @@ fn parse_npy(name: &str, bytes: &[u8]) -> std::result::Result<Array, String> {
 
 /// Reads the episodes of an NPZ demonstration file.
 pub fn read(path: &Path, source: &str) -> Result<Vec<Trajectory>> {
+    parse(path, &std::fs::read(path).map_err(|e| Error::io(path, e))?, source)
+}
+
+/// The episodes of an NPZ file's bytes; `path` names it in every refusal.
+pub fn parse(path: &Path, bytes: &[u8], source: &str) -> Result<Vec<Trajectory>> {
     let bad = |m: String| Error::file(path, m);
-    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut zip = zip::ZipArchive::new(file).map_err(|e| bad(format!("not an NPZ (zip) file: {e}")))?;
+    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| bad(format!("not an NPZ (zip) file: {e}")))?;
     let mut get = |name: &str| -> Result<Array> {
         let mut f = zip
             .by_name(&format!("{name}.npy"))

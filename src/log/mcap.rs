@@ -124,7 +124,52 @@ fn nums(v: &serde_json::Value, key: &str) -> Option<Vec<f32>> {
 }
 
 pub fn read(path: &Path) -> Result<Rollouts> {
-    let buf = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse(path, &std::fs::read(path).map_err(|e| Error::io(path, e))?)
+}
+
+/// Every message of an MCAP file's bytes, as (topic, sequence, payload), read with a limit on
+/// every record's declared length: the crate's message stream trusts a chunk's inner lengths
+/// and would allocate whatever a corrupt one claims. Chunk CRCs are checked, since zstd may
+/// not notice a flipped byte inside compressed data.
+fn messages(buf: &[u8], mut each: impl FnMut(&str, u32, &[u8]) -> Result<()>) -> std::result::Result<Result<()>, String> {
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    // No record of a real file is longer than the file could decompress to.
+    let limit = buf.len().saturating_mul(MAX_DECOMPRESSION).min(MAX_RECORD);
+    let mut reader =
+        LinearReader::new_with_options(LinearReaderOptions::default().with_record_length_limit(limit).with_validate_chunk_crcs(true));
+    let mut topics: BTreeMap<u16, String> = BTreeMap::new();
+    let mut at = 0;
+    while let Some(event) = reader.next_event() {
+        match event.map_err(|e| e.to_string())? {
+            LinearReadEvent::ReadRequest(n) => {
+                let n = n.min(buf.len() - at);
+                reader.insert(n).copy_from_slice(&buf[at..at + n]);
+                reader.notify_read(n);
+                at += n;
+            }
+            LinearReadEvent::Record { data, opcode } => match mcap::parse_record(opcode, data).map_err(|e| e.to_string())? {
+                mcap::records::Record::Channel(c) => {
+                    topics.insert(c.id, c.topic);
+                }
+                mcap::records::Record::Message { header, data } => {
+                    let topic = topics.get(&header.channel_id).ok_or(format!("message {} on an undeclared channel", header.sequence))?;
+                    if let Err(e) = each(topic, header.sequence, &data) {
+                        return Ok(Err(e));
+                    }
+                }
+                _ => {}
+            },
+        }
+    }
+    Ok(Ok(()))
+}
+
+/// The most a record may claim: per byte of the file, and in all.
+const MAX_DECOMPRESSION: usize = 4096;
+const MAX_RECORD: usize = 1 << 30;
+
+/// The rollouts in an MCAP file's bytes; `path` names it in every refusal.
+pub fn parse(path: &Path, buf: &[u8]) -> Result<Rollouts> {
     // Another kind of file is named as such, not called corrupt (nor offered for deletion).
     if !buf.starts_with(mcap::MAGIC) {
         return Err(Error::file(path, "is not an MCAP file (rollouts are the rollouts.mcap files of a store's artifacts)"));
@@ -151,14 +196,10 @@ pub fn read(path: &Path) -> Result<Rollouts> {
     let act_dim: usize = meta.get("act_dim").and_then(|d| d.parse().ok()).unwrap_or(0);
     let mut learned: Vec<Vec<f64>> = Vec::new();
     let mut any_learned = false;
-    // Chunk CRCs catch a flipped byte inside compressed data, which zstd may not.
-    let stream =
-        mcap::MessageStream::new_with_options(&buf, mcap::read::Options::ValidateChunkCrcs.into()).map_err(|e| corrupt(path, e))?;
-    for msg in stream {
-        let msg = msg.map_err(|e| corrupt(path, e))?;
-        let v: serde_json::Value = serde_json::from_slice(&msg.data).map_err(|e| corrupt(path, e))?;
-        let bad = |what: &str| corrupt(path, format!("message {} on {} has no valid {what}", msg.sequence, msg.channel.topic));
-        match msg.channel.topic.as_str() {
+    let outcome = messages(buf, |topic, sequence, data| {
+        let v: serde_json::Value = serde_json::from_slice(data).map_err(|e| corrupt(path, e))?;
+        let bad = |what: &str| corrupt(path, format!("message {sequence} on {topic} has no valid {what}"));
+        match topic {
             "/episode" => {
                 let obs = nums(&v, "obs").ok_or_else(|| bad("obs"))?;
                 r.trajectories.push(Trajectory {
@@ -194,7 +235,9 @@ pub fn read(path: &Path) -> Result<Rollouts> {
             }
             _ => {}
         }
-    }
+        Ok(())
+    });
+    outcome.map_err(|e| corrupt(path, e))??;
     for t in &r.trajectories {
         if t.obs.len() != (t.len() + 1) * obs_dim || t.actions.len() != t.len() * act_dim {
             return Err(corrupt(path, "an episode's observations or actions do not match the dimensions in its metadata"));
@@ -238,5 +281,29 @@ mod tests {
         let err = read(&path).unwrap_err().to_string();
         assert!(err.contains("truncated or corrupt MCAP"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Found by the fuzz tests: a record inside a chunk that claims an absurd length made the
+    /// crate's message stream allocate it (and abort) before any CRC was checked.
+    #[test]
+    fn a_chunk_record_claiming_exabytes_is_refused_not_allocated() {
+        let mut buf = Vec::new();
+        {
+            let opts = mcap::WriteOptions::new().compression(None).profile("");
+            let mut w = opts.create(std::io::Cursor::new(&mut buf)).unwrap();
+            let chan = w.add_channel(0, "/episode", "json", &BTreeMap::new()).unwrap();
+            let header = mcap::records::MessageHeader { channel_id: chan, sequence: 0, log_time: 0, publish_time: 0 };
+            w.write_to_known_channel(&header, b"PAYLOAD-MARK").unwrap();
+            let rollout = BTreeMap::from([("format".to_string(), FORMAT.to_string())]);
+            w.write_metadata(&mcap::records::Metadata { name: "idrex.rollout".into(), metadata: rollout }).unwrap();
+            w.finish().unwrap();
+        }
+        let mark = buf.windows(12).position(|x| x == b"PAYLOAD-MARK").expect("the payload, uncompressed");
+        // The message record: opcode, length (u64), channel (u16), sequence (u32), two times (u64).
+        let len_at = mark - 22 - 8;
+        assert_eq!(buf[len_at - 1], 0x05, "a message record");
+        buf[len_at..len_at + 8].copy_from_slice(&(u64::MAX / 5).to_le_bytes());
+        let err = parse(Path::new("r.mcap"), &buf).unwrap_err().to_string();
+        assert!(err.starts_with("r.mcap: truncated or corrupt MCAP"), "{err}");
     }
 }

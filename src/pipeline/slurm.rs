@@ -49,7 +49,8 @@ pub enum JobState {
     Other(String),
 }
 
-fn parse_squeue(text: &str) -> BTreeMap<String, JobState> {
+/// `squeue --noheader --format=%i|%T|%r` output: the jobs still queued or running.
+pub fn parse_squeue(text: &str) -> BTreeMap<String, JobState> {
     text.lines()
         .filter_map(|l| {
             let mut f = l.trim().split('|');

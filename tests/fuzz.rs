@@ -1,0 +1,382 @@
+//! Generated inputs for every loader a user or a store can hand idrex (proptest): pipeline
+//! YAML generated from the schema and then mutated; NPZ and MCAP demonstrations with flipped
+//! bytes, cuts, wrong dtypes and shapes; manifests as a store reads them back; Slurm's queue
+//! listing. Each must end in Ok or in a refusal whose every line names the file, never in a
+//! panic, and within a second. The suite runs a few thousand cases per loader; the soak
+//! (`cargo test --release --test tests fuzz::soak -- --ignored`) a million each. Inputs that
+//! once failed are kept by proptest in `proptest-regressions/` and replayed first.
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use proptest::prelude::*;
+use proptest::test_runner::{Config, TestCaseError, TestRunner};
+
+use crate::util::{TempDir, idrex, python, repo, stderr};
+
+/// What every loader owes its caller for any input: an answer within a second, and a
+/// refusal whose every line names the file.
+fn judge(file: &str, start: Instant, outcome: Result<(), String>) -> Result<(), TestCaseError> {
+    let took = start.elapsed();
+    prop_assert!(took < Duration::from_secs(1), "took {took:?}");
+    if let Err(e) = outcome {
+        prop_assert!(!e.trim().is_empty(), "an empty refusal");
+        for line in e.lines() {
+            prop_assert!(line.contains(file), "a refusal line that does not name {file}: {line}");
+        }
+    }
+    Ok(())
+}
+
+fn runner(cases: u32) -> TestRunner {
+    // Failures are written beside this file (proptest-regressions/) and replayed first.
+    TestRunner::new(Config { cases, max_shrink_iters: 2000, source_file: Some(file!()), ..Config::default() })
+}
+
+/// A byte-level edit of a valid file.
+#[derive(Debug, Clone)]
+enum Edit {
+    Flip(usize, u8),
+    Cut(usize),
+    Insert(usize, Vec<u8>),
+    Copy { from: usize, to: usize, len: usize },
+}
+
+fn edits() -> impl Strategy<Value = Vec<Edit>> {
+    let edit = prop_oneof![
+        4 => (any::<usize>(), any::<u8>()).prop_map(|(i, b)| Edit::Flip(i, b)),
+        1 => any::<usize>().prop_map(Edit::Cut),
+        1 => (any::<usize>(), prop::collection::vec(any::<u8>(), 1..16)).prop_map(|(i, b)| Edit::Insert(i, b)),
+        1 => (any::<usize>(), any::<usize>(), 1..64usize).prop_map(|(from, to, len)| Edit::Copy { from, to, len }),
+    ];
+    prop::collection::vec(edit, 1..6)
+}
+
+fn apply(base: &[u8], edits: &[Edit]) -> Vec<u8> {
+    let mut b = base.to_vec();
+    for e in edits {
+        let n = b.len().max(1);
+        match e {
+            Edit::Flip(i, x) if !b.is_empty() => b[i % n] ^= x | 1,
+            Edit::Cut(i) => b.truncate(i % n),
+            Edit::Insert(i, x) => {
+                let at = i % (b.len() + 1);
+                b.splice(at..at, x.iter().copied());
+            }
+            Edit::Copy { from, to, len } if !b.is_empty() => {
+                let from = from % n;
+                let chunk: Vec<u8> = b[from..(from + len).min(b.len())].to_vec();
+                let to = to % n;
+                let end = (to + chunk.len()).min(b.len());
+                b[to..end].copy_from_slice(&chunk[..end - to]);
+            }
+            _ => {}
+        }
+    }
+    b
+}
+
+/// The smoke pipeline run once per test binary: real manifests and rollouts to mutate.
+fn smoke_store() -> &'static Path {
+    static STORE: OnceLock<PathBuf> = OnceLock::new();
+    STORE.get_or_init(|| {
+        // Kept for the binary's life: every fuzz test of this run reads it.
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("fuzz-store-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let (store, rec) = (dir.join("store"), dir.join("smoke.rrd"));
+        let smoke = repo("pipelines/smoke.yaml");
+        let out =
+            idrex(&["pipeline", "run", smoke.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        store
+    })
+}
+
+fn store_files(name: &str) -> Vec<Vec<u8>> {
+    let mut out: Vec<Vec<u8>> = std::fs::read_dir(smoke_store())
+        .unwrap()
+        .flatten()
+        .map(|e| e.path().join(name))
+        .filter(|p| p.exists())
+        .map(|p| std::fs::read(p).unwrap())
+        .collect();
+    out.sort();
+    out
+}
+
+// ---- pipeline YAML ----
+
+/// A YAML value of any shape: what a careless or hostile file puts at a field.
+fn yaml_value() -> impl Strategy<Value = serde_yaml::Value> {
+    use serde_yaml::Value as V;
+    let leaf = prop_oneof![
+        Just(V::Null),
+        any::<bool>().prop_map(V::Bool),
+        any::<i64>().prop_map(|i| V::Number(i.into())),
+        prop_oneof![Just(0u64), Just(u64::MAX), 1..10_000u64].prop_map(|i| V::Number(i.into())),
+        prop_oneof![any::<f64>(), Just(1e308), Just(-0.0), Just(1e-320)].prop_map(|f| V::Number(f.into())),
+        "[a-zA-Z0-9_./-]{0,12}".prop_map(V::String),
+        (0..100_000usize).prop_map(|n| V::String("x".repeat(n))),
+        prop_oneof![Just("Hopper-v5"), Just("bc"), Just("drex"), Just("ranked-floor"), Just("../../etc/passwd"), Just("~")]
+            .prop_map(|s| V::String(s.into())),
+    ];
+    leaf.prop_recursive(4, 32, 6, |inner| {
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 0..6).prop_map(V::Sequence),
+            prop::collection::vec(("[a-z_]{1,10}", inner), 0..5)
+                .prop_map(|kv| V::Mapping(kv.into_iter().map(|(k, v)| (V::String(k), v)).collect())),
+        ]
+    })
+}
+
+#[derive(Debug, Clone)]
+enum YamlEdit {
+    /// Set the field at this schema path (index into the schema's fields) to a value.
+    Set(usize, serde_yaml::Value),
+    Remove(usize),
+    Unknown(String, serde_yaml::Value),
+    /// Wrap the field in this many nested lists.
+    Nest(usize, usize),
+}
+
+fn yaml_case() -> impl Strategy<Value = (Vec<YamlEdit>, Vec<Edit>, bool)> {
+    let edit = prop_oneof![
+        4 => (any::<usize>(), yaml_value()).prop_map(|(i, v)| YamlEdit::Set(i, v)),
+        1 => any::<usize>().prop_map(YamlEdit::Remove),
+        1 => ("[a-z_]{1,12}", yaml_value()).prop_map(|(k, v)| YamlEdit::Unknown(k, v)),
+        1 => (any::<usize>(), 1..300usize).prop_map(|(i, d)| YamlEdit::Nest(i, d)),
+    ];
+    (prop::collection::vec(edit, 1..5), edits(), any::<bool>())
+}
+
+fn set_path(doc: &mut serde_yaml::Value, path: &[&str], value: Option<serde_yaml::Value>) {
+    use serde_yaml::Value as V;
+    let mut at = doc;
+    for (i, key) in path.iter().enumerate() {
+        if !at.is_mapping() {
+            *at = V::Mapping(Default::default());
+        }
+        let map = at.as_mapping_mut().unwrap();
+        let k = V::String(key.to_string());
+        if i + 1 == path.len() {
+            match value {
+                Some(v) => {
+                    map.insert(k, v);
+                }
+                None => {
+                    map.remove(&k);
+                }
+            }
+            return;
+        }
+        at = map.entry(k).or_insert(V::Mapping(Default::default()));
+    }
+}
+
+fn yaml_text(fields: &[String], base: &serde_yaml::Value, case: &(Vec<YamlEdit>, Vec<Edit>, bool)) -> Vec<u8> {
+    let mut doc = base.clone();
+    let path = |i: usize| fields[i % fields.len()].split('.').map(str::to_string).collect::<Vec<_>>();
+    for e in &case.0 {
+        match e {
+            YamlEdit::Set(i, v) => set_path(&mut doc, &path(*i).iter().map(String::as_str).collect::<Vec<_>>(), Some(v.clone())),
+            YamlEdit::Remove(i) => set_path(&mut doc, &path(*i).iter().map(String::as_str).collect::<Vec<_>>(), None),
+            YamlEdit::Unknown(k, v) => set_path(&mut doc, &[k.as_str()], Some(v.clone())),
+            YamlEdit::Nest(i, depth) => {
+                let mut v = serde_yaml::Value::Number(1.into());
+                for _ in 0..*depth {
+                    v = serde_yaml::Value::Sequence(vec![v]);
+                }
+                set_path(&mut doc, &path(*i).iter().map(String::as_str).collect::<Vec<_>>(), Some(v));
+            }
+        }
+    }
+    let text = serde_yaml::to_string(&doc).unwrap_or_default().into_bytes();
+    // Half the cases also take byte edits on top: YAML that no longer parses as YAML.
+    if case.2 { apply(&text, &case.1) } else { text }
+}
+
+fn fuzz_pipeline_yaml(cases: u32) {
+    let fields: Vec<String> = idrex::pipeline::config::schema::fields().into_iter().map(|f| f.path).collect();
+    let base: serde_yaml::Value = serde_yaml::from_str(&std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap()).unwrap();
+    let dir = TempDir::new("fuzz-yaml");
+    let file = dir.join("fuzzed.yaml");
+    let name = file.display().to_string();
+    runner(cases)
+        .run(&yaml_case(), |case| {
+            let text = yaml_text(&fields, &base, &case);
+            let text = String::from_utf8_lossy(&text);
+            let start = Instant::now();
+            let outcome = idrex::pipeline::Pipeline::parse(&file, &text)
+                .map_err(|e| e.to_string())
+                .and_then(|p| idrex::pipeline::expand(&p).map(|_| ()).map_err(|e| format!("{name}: {e}")));
+            judge(&name, start, outcome)
+        })
+        .unwrap();
+}
+
+// ---- NPZ demonstrations ----
+
+/// A valid NPZ written by numpy: 2 episodes (3 and 2 steps), 2-d observations, 1-d actions.
+fn npz_bases() -> Vec<Vec<u8>> {
+    let dir = TempDir::new("fuzz-npz");
+    let code = r#"
+import numpy as np, sys
+obs = np.arange(10, dtype=np.float64).reshape(5, 2)
+for i, (o, a, r, l) in enumerate([
+    (obs, np.ones((5, 1)), np.arange(5.0), np.array([3, 2])),
+    (obs.astype(np.float32), np.ones((5, 1), np.float32), np.arange(5, dtype=np.float32), np.array([3, 2], np.int32)),
+]):
+    np.savez(sys.argv[1] + f"/{i}.npz", obs=o, actions=a, rewards=r, episode_lengths=l)
+    np.savez_compressed(sys.argv[1] + f"/{i}c.npz", obs=o, actions=a, rewards=r, episode_lengths=l)
+"#;
+    let out = std::process::Command::new(python()).args(["-c", code, dir.path().to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    ["0", "0c", "1", "1c"].iter().map(|n| std::fs::read(dir.join(&format!("{n}.npz"))).unwrap()).collect()
+}
+
+fn fuzz_npz(cases: u32) {
+    let bases = npz_bases();
+    let file = PathBuf::from("/demos/fuzzed.npz");
+    for b in &bases {
+        assert!(idrex::data::npz::parse(&file, b, "demos").is_ok(), "a valid base");
+    }
+    runner(cases)
+        .run(&(0..bases.len(), edits()), |(i, e)| {
+            let bytes = apply(&bases[i], &e);
+            let start = Instant::now();
+            let outcome = idrex::data::npz::parse(&file, &bytes, "demos").map(|_| ()).map_err(|e| e.to_string());
+            judge("/demos/fuzzed.npz", start, outcome)
+        })
+        .unwrap();
+}
+
+// ---- MCAP rollouts and demonstrations ----
+
+fn fuzz_mcap(cases: u32) {
+    let mut bases = store_files("rollouts.mcap");
+    bases.retain(|b| b.len() < 200_000);
+    bases.truncate(4);
+    assert!(!bases.is_empty());
+    let file = PathBuf::from("/store/key/rollouts.mcap");
+    runner(cases)
+        .run(&(0..bases.len(), edits()), |(i, e)| {
+            let bytes = apply(&bases[i], &e);
+            let start = Instant::now();
+            let outcome = idrex::log::mcap::parse(&file, &bytes).map(|_| ()).map_err(|e| e.to_string());
+            judge("/store/key/rollouts.mcap", start, outcome)
+        })
+        .unwrap();
+}
+
+// ---- manifests read back from a store ----
+
+fn fuzz_manifests(cases: u32) {
+    let bases: Vec<Vec<u8>> = store_files("manifest.json");
+    assert!(bases.len() >= 10);
+    runner(cases)
+        .run(&(0..bases.len(), edits(), prop::option::of(("[a-z_]{1,8}", yaml_value()))), |(i, e, set)| {
+            let mut bytes = bases[i].clone();
+            // A value of any shape at a top-level field, or bytes edited.
+            if let Some((k, v)) = set {
+                let mut m: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+                let v = serde_json::to_value(&v).unwrap_or(serde_json::Value::Null);
+                let keys: Vec<String> = m.as_object().unwrap().keys().cloned().collect();
+                let key = keys.iter().find(|x| x.starts_with(&k[..1])).cloned().unwrap_or(k);
+                m[key] = v;
+                bytes = serde_json::to_vec(&m).unwrap();
+            } else {
+                bytes = apply(&bytes, &e);
+            }
+            let start = Instant::now();
+            let outcome = (|| -> Result<(), String> {
+                let text = std::str::from_utf8(&bytes).map_err(|e| format!("manifest.json: {e}"))?;
+                let m: idrex::store::Manifest = serde_json::from_str(text).map_err(|e| format!("manifest.json: {e}"))?;
+                // Everything that reads a manifest: its typed parameters and metrics, the
+                // test-set bookkeeping, the tracker.
+                let typed = idrex::pipeline::stage::Typed::of(&m);
+                let _ = idrex::pipeline::test_set::Look::of(&m);
+                let _ = idrex::exp::studies(std::slice::from_ref(&m));
+                typed.map(|_| ()).map_err(|e| format!("manifest.json: {e}"))
+            })();
+            judge("manifest.json", start, outcome)
+        })
+        .unwrap();
+}
+
+// ---- Slurm's queue listing ----
+
+fn fuzz_squeue(cases: u32) {
+    let line = prop_oneof![
+        "[0-9]{1,8}\\|(PENDING|RUNNING|COMPLETED|FAILED|CANCELLED|[A-Z_]{0,12})\\|[A-Za-z()_ ]{0,20}",
+        ".{0,80}",
+        Just(String::new()),
+        Just("|||||".to_string()),
+    ];
+    runner(cases)
+        .run(&prop::collection::vec(line, 0..20), |lines| {
+            let text = lines.join("\n");
+            let start = Instant::now();
+            let parsed = idrex::pipeline::slurm::parse_squeue(&text);
+            // A listed job is one the text named, in a state it can wait for.
+            for (id, _) in &parsed {
+                prop_assert!(text.contains(id.as_str()));
+            }
+            judge("squeue", start, Ok(()))
+        })
+        .unwrap();
+}
+
+/// The suite's share: a few thousand cases per loader (fewer for YAML, whose cases expand a
+/// whole pipeline).
+#[test]
+fn no_loader_panics_hangs_or_answers_without_naming_the_file() {
+    fuzz_pipeline_yaml(1_000);
+    fuzz_npz(3_000);
+    fuzz_mcap(3_000);
+    fuzz_manifests(3_000);
+    fuzz_squeue(3_000);
+}
+
+fn soak_cases() -> u32 {
+    std::env::var("IDREX_SOAK_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(1_000_000)
+}
+
+#[test]
+#[ignore = "the soak: a million cases per loader (IDREX_SOAK_CASES to change)"]
+fn soak_pipeline_yaml() {
+    let t = Instant::now();
+    fuzz_pipeline_yaml(soak_cases());
+    eprintln!("soak: pipeline YAML, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
+
+#[test]
+#[ignore = "the soak"]
+fn soak_npz() {
+    let t = Instant::now();
+    fuzz_npz(soak_cases());
+    eprintln!("soak: NPZ, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
+
+#[test]
+#[ignore = "the soak"]
+fn soak_mcap() {
+    let t = Instant::now();
+    fuzz_mcap(soak_cases());
+    eprintln!("soak: MCAP, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
+
+#[test]
+#[ignore = "the soak"]
+fn soak_manifests() {
+    let t = Instant::now();
+    fuzz_manifests(soak_cases());
+    eprintln!("soak: manifests, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
+
+#[test]
+#[ignore = "the soak"]
+fn soak_squeue() {
+    let t = Instant::now();
+    fuzz_squeue(soak_cases());
+    eprintln!("soak: squeue, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
