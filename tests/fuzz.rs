@@ -1,10 +1,11 @@
 //! Generated inputs for every loader a user or a store can hand idrex (proptest): pipeline
 //! YAML generated from the schema and then mutated; NPZ and MCAP demonstrations with flipped
 //! bytes, cuts, wrong dtypes and shapes; manifests as a store reads them back; Slurm's queue
-//! listing. Each must end in Ok or in a refusal whose every line names the file, never in a
+//! listing; the sidecars of saved policies and rewards. Each must end in Ok or in a refusal whose every line names the file, never in a
 //! panic, and within a second. The suite runs a few thousand cases per loader; the soak
 //! (`cargo test --release --test tests fuzz::soak -- --ignored`) a million each. Inputs that
-//! once failed are kept by proptest in `proptest-regressions/` and replayed first.
+//! once failed are kept by proptest in `tests/fuzz-regressions.txt` and replayed first; the
+//! MCAP reader's abort it found is also a unit test in `log/mcap.rs`.
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
@@ -29,8 +30,11 @@ fn judge(file: &str, start: Instant, outcome: Result<(), String>) -> Result<(), 
 }
 
 fn runner(cases: u32) -> TestRunner {
-    // Failures are written beside this file (proptest-regressions/) and replayed first.
-    TestRunner::new(Config { cases, max_shrink_iters: 2000, source_file: Some(file!()), ..Config::default() })
+    // A failure's seed is appended to tests/fuzz-regressions.txt (commit it) and replayed
+    // first on every later run.
+    let persistence =
+        proptest::test_runner::FileFailurePersistence::Direct(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fuzz-regressions.txt"));
+    TestRunner::new(Config { cases, max_shrink_iters: 2000, failure_persistence: Some(Box::new(persistence)), ..Config::default() })
 }
 
 /// A byte-level edit of a valid file.
@@ -303,6 +307,86 @@ fn fuzz_manifests(cases: u32) {
         .unwrap();
 }
 
+// ---- the sidecars of saved policies and rewards ----
+
+/// (sidecar text, weights directory) of every policy and reward in the smoke store.
+fn sidecar_bases(name: &str, weights: &str) -> Vec<(Vec<u8>, PathBuf)> {
+    let mut out: Vec<(Vec<u8>, PathBuf)> = walk(smoke_store())
+        .into_iter()
+        .filter(|p| p.file_name().is_some_and(|n| n == name) && p.with_file_name(weights).exists())
+        .map(|p| (std::fs::read(&p).unwrap(), p.parent().unwrap().to_path_buf()))
+        .collect();
+    out.sort();
+    out.dedup_by(|a, b| a.0 == b.0);
+    out
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() { out.extend(walk(&p)) } else { out.push(p) }
+    }
+    out
+}
+
+/// A sidecar edited at a field of its config (any value) or in its bytes.
+fn edit_sidecar(base: &[u8], field: &Option<(usize, serde_yaml::Value)>, e: &[Edit]) -> Vec<u8> {
+    match field {
+        Some((i, v)) => {
+            let mut j: serde_json::Value = serde_json::from_slice(base).unwrap();
+            let keys: Vec<String> = j["config"].as_object().unwrap().keys().cloned().collect();
+            j["config"][&keys[i % keys.len()]] = serde_json::to_value(v).unwrap_or(serde_json::Value::Null);
+            serde_json::to_vec(&j).unwrap()
+        }
+        None => apply(base, e),
+    }
+}
+
+/// `check_sidecar` on every case; with `load`, the whole load (libtorch) where it passes.
+fn fuzz_sidecars(cases: u32, load: bool) {
+    use idrex::nn::{policy, reward};
+    for (name, weights, is_policy) in [(policy::SIDECAR, policy::WEIGHTS, true), (reward::SIDECAR, reward::WEIGHTS, false)] {
+        let bases = sidecar_bases(name, weights);
+        assert!(!bases.is_empty(), "no {name} in the smoke store");
+        let scratch = TempDir::new("fuzz-sidecar");
+        let side_path = scratch.join(name);
+        let shown = side_path.display().to_string();
+        let big = prop_oneof![Just(u64::MAX as usize), Just(1usize << 40), Just(0usize), any::<usize>()]
+            .prop_map(|n| serde_yaml::Value::Number((n as u64).into()));
+        let value =
+            prop_oneof![yaml_value(), big, prop::collection::vec(1..1usize << 32, 0..4).prop_map(|v| serde_yaml::to_value(v).unwrap())];
+        runner(cases)
+            .run(&(0..bases.len(), prop::option::of((any::<usize>(), value)), edits()), |(i, field, e)| {
+                let (base, dir) = &bases[i];
+                let text = String::from_utf8_lossy(&edit_sidecar(base, &field, &e)).into_owned();
+                let bytes = std::fs::metadata(dir.join(weights)).unwrap().len();
+                let start = Instant::now();
+                let checked = if is_policy {
+                    policy::ActorCritic::check_sidecar(&side_path, &text, bytes).map(|_| ())
+                } else {
+                    reward::RewardEnsemble::check_sidecar(&side_path, &text, bytes).map(|_| ())
+                };
+                let outcome = match checked {
+                    Ok(()) if load => {
+                        std::fs::write(&side_path, &text).unwrap();
+                        std::fs::copy(dir.join(weights), scratch.join(weights)).unwrap();
+                        let r = if is_policy {
+                            policy::ActorCritic::load(scratch.path()).map(|_| ())
+                        } else {
+                            reward::RewardEnsemble::load(scratch.path()).map(|_| ())
+                        };
+                        // A load refuses in the weights file's name or the sidecar's.
+                        r.map_err(|e| e.to_string().replace(&scratch.join(weights).display().to_string(), &shown))
+                    }
+                    other => other.map_err(|e| e.to_string()),
+                };
+                judge(&shown, start, outcome)
+            })
+            .unwrap();
+    }
+}
+
 // ---- Slurm's queue listing ----
 
 fn fuzz_squeue(cases: u32) {
@@ -334,6 +418,8 @@ fn no_loader_panics_hangs_or_answers_without_naming_the_file() {
     fuzz_npz(3_000);
     fuzz_mcap(3_000);
     fuzz_manifests(3_000);
+    fuzz_sidecars(300, true);
+    fuzz_sidecars(3_000, false);
     fuzz_squeue(3_000);
 }
 
@@ -371,6 +457,14 @@ fn soak_manifests() {
     let t = Instant::now();
     fuzz_manifests(soak_cases());
     eprintln!("soak: manifests, {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
+}
+
+#[test]
+#[ignore = "the soak"]
+fn soak_sidecars() {
+    let t = Instant::now();
+    fuzz_sidecars(soak_cases(), false);
+    eprintln!("soak: sidecars (policy and reward, each), {} cases in {:.0} s", soak_cases(), t.elapsed().as_secs_f64());
 }
 
 #[test]

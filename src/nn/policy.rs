@@ -8,7 +8,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
-use super::sidecar::{load_weights, read_json, save_weights, write_json};
+use super::sidecar::{check_size, load_weights, mlp_parameters, parse_json, save_weights, weights_bytes, write_json};
 use super::{Activation, Init, Mlp, MlpCpu, WeightInit};
 use crate::data::normalize::RunningMeanStd;
 use crate::error::{Error, Result};
@@ -65,8 +65,9 @@ impl PolicyConfig {
     }
 }
 
+/// What `policy.json` holds.
 #[derive(serde::Serialize, serde::Deserialize)]
-struct Sidecar {
+pub struct Sidecar {
     format: String,
     config: PolicyConfig,
     env: Option<String>,
@@ -134,17 +135,29 @@ impl ActorCritic {
         write_json(&dir.join(SIDECAR), &sidecar)
     }
 
-    pub fn load(dir: &Path) -> Result<Self> {
-        let side_path = dir.join(SIDECAR);
-        let side: Sidecar = read_json(&side_path)?;
+    /// A sidecar's text checked before anything is built: its format, its normalisation's
+    /// dimensions, and that the weights file (`weights_bytes` long) can hold the network it
+    /// describes.
+    pub fn check_sidecar(side_path: &Path, text: &str, weights_bytes: u64) -> Result<Sidecar> {
+        let side: Sidecar = parse_json(side_path, text)?;
         if side.format != FORMAT {
-            return Err(Error::file(&side_path, format!("format '{}' is not {FORMAT}", side.format)));
+            return Err(Error::file(side_path, format!("format '{}' is not {FORMAT}", side.format)));
         }
         if let Some(n) = &side.obs_norm
             && n.dim() != side.config.obs_dim
         {
-            return Err(Error::file(&side_path, format!("obs_norm has {} dims, obs_dim is {}", n.dim(), side.config.obs_dim)));
+            return Err(Error::file(side_path, format!("obs_norm has {} dims, obs_dim is {}", n.dim(), side.config.obs_dim)));
         }
+        let c = &side.config;
+        let actor = mlp_parameters(&std::iter::once(c.obs_dim).chain(c.hidden.iter().copied()).chain([c.act_dim]).collect::<Vec<_>>());
+        check_size(side_path, actor.and_then(|a| a.checked_add(c.act_dim as u64)), weights_bytes)?;
+        Ok(side)
+    }
+
+    pub fn load(dir: &Path) -> Result<Self> {
+        let side_path = dir.join(SIDECAR);
+        let text = std::fs::read_to_string(&side_path).map_err(|e| Error::io(&side_path, e))?;
+        let side = Self::check_sidecar(&side_path, &text, weights_bytes(&dir.join(WEIGHTS))?)?;
         let mut p = crate::nn::building(|| ActorCritic::new(side.config));
         load_weights(&[&p.vs], &dir.join(WEIGHTS), &side_path)?;
         p.obs_norm = side.obs_norm;

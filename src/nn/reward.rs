@@ -11,7 +11,7 @@ use std::path::Path;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
 use super::dense::Dense;
-use super::sidecar::{load_weights, read_json, save_weights, write_json};
+use super::sidecar::{check_size, load_weights, mlp_parameters, parse_json, save_weights, weights_bytes, write_json};
 use super::{Activation, Mlp, WeightInit};
 use crate::data::normalize::RunningMeanStd;
 use crate::error::{Error, Result};
@@ -126,8 +126,9 @@ fn is_zero(x: &f64) -> bool {
     *x == 0.0
 }
 
+/// What a reward ensemble's sidecar holds.
 #[derive(serde::Serialize, serde::Deserialize)]
-struct Sidecar {
+pub struct Sidecar {
     format: String,
     config: RewardConfig,
     norms: Vec<RunningMeanStd>,
@@ -349,12 +350,26 @@ impl RewardEnsemble {
         write_json(&dir.join(SIDECAR), &side)
     }
 
+    /// A sidecar's text checked before anything is built: its format, and that the weights
+    /// file (`weights_bytes` long) can hold the ensemble it describes.
+    pub fn check_sidecar(side_path: &Path, text: &str, weights_bytes: u64) -> Result<Sidecar> {
+        let side: Sidecar = parse_json(side_path, text)?;
+        if side.format != FORMAT {
+            return Err(Error::file(side_path, format!("format '{}' is not {FORMAT}", side.format)));
+        }
+        let c = &side.config;
+        let one = c
+            .obs_dim
+            .checked_add(c.act_dim.unwrap_or(0))
+            .and_then(|input| mlp_parameters(&std::iter::once(input).chain(c.hidden.iter().copied()).chain([1]).collect::<Vec<_>>()));
+        check_size(side_path, one.and_then(|n| n.checked_mul(c.models as u64)), weights_bytes)?;
+        Ok(side)
+    }
+
     pub fn load(dir: &Path) -> Result<Self> {
         let side_path = dir.join(SIDECAR);
-        let side: Sidecar = read_json(&side_path)?;
-        if side.format != FORMAT {
-            return Err(Error::file(&side_path, format!("format '{}' is not {FORMAT}", side.format)));
-        }
+        let text = std::fs::read_to_string(&side_path).map_err(|e| Error::io(&side_path, e))?;
+        let side = Self::check_sidecar(&side_path, &text, weights_bytes(&dir.join(WEIGHTS))?)?;
         let mut r = crate::nn::building(|| RewardEnsemble::new(side.config));
         load_weights(&r.stores.iter().collect::<Vec<_>>(), &dir.join(WEIGHTS), &side_path)?;
         if side.norms.len() == r.nets.len() {

@@ -14,9 +14,37 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
     std::fs::write(path, text + "\n").map_err(|e| Error::io(path, e))
 }
 
-pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    serde_json::from_str(&text).map_err(|e| Error::file(path, format!("not a valid sidecar: {e}")))
+/// A sidecar's text parsed; `path` names it in a refusal.
+pub fn parse_json<T: serde::de::DeserializeOwned>(path: &Path, text: &str) -> Result<T> {
+    serde_json::from_str(text).map_err(|e| Error::file(path, format!("not a valid sidecar: {e}")))
+}
+
+/// The parameters of an MLP with these layer sizes (weights and biases), if they fit a u64.
+pub fn mlp_parameters(sizes: &[usize]) -> Option<u64> {
+    sizes.windows(2).try_fold(0u64, |n, w| {
+        let (i, o) = (u64::try_from(w[0]).ok()?, u64::try_from(w[1]).ok()?);
+        n.checked_add(i.checked_mul(o)?.checked_add(o)?)
+    })
+}
+
+/// Refuses a sidecar that describes more parameters than its weights file can hold (4 bytes
+/// each, f32): a hostile or mismatched sidecar must not make idrex build a network first.
+pub fn check_size(sidecar: &Path, parameters: Option<u64>, weights_bytes: u64) -> Result<()> {
+    match parameters {
+        Some(p) if p.saturating_mul(4) <= weights_bytes => Ok(()),
+        p => Err(Error::file(
+            sidecar,
+            format!(
+                "describes {} parameters, more than the {weights_bytes}-byte weights file beside it holds; the two files do not belong together",
+                p.map_or("uncountably many".to_string(), |p| p.to_string())
+            ),
+        )),
+    }
+}
+
+/// The size of a weights file, to check a sidecar against before anything is built.
+pub fn weights_bytes(path: &Path) -> Result<u64> {
+    Ok(std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len())
 }
 
 /// Writes the variables of all `stores` (whose names must not collide) to one file.
