@@ -109,6 +109,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let (mut d_env, mut d_pipeline, mut d_ret) = (vec![], vec![], vec![]);
     let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
     let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
+    let mut a_capped: Vec<Option<f64>> = vec![];
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, TableId, String), Vec<RunEval>> = BTreeMap::new();
     let mut demo_returns: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
@@ -162,6 +163,12 @@ fn collect(store: &Artifacts) -> Result<Long> {
             a_pearson.push(acc.pearson);
             a_pairwise.push(acc.pairwise_accuracy);
             a_over_checkpoints.push(over_checkpoints(&x.checkpoints));
+            // The PPO run behind the policy: how much of its learned reward the ceiling capped.
+            let ppo = m.inputs.get(&Role::Policy.name()).and_then(|k| store.get(k)).and_then(|pm| Typed::of(pm).ok());
+            a_capped.push(match ppo {
+                Some(Typed { metrics: Metrics::Ppo(x), .. }) => x.reward_capped,
+                _ => None,
+            });
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
         if let Some(dk) = m.inputs.get(&Role::Demos.name())
@@ -209,6 +216,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
             Column::new("spearman".into(), a_spearman),
             Column::new("pairwise_accuracy".into(), a_pairwise),
             Column::new("spearman_over_checkpoints".into(), a_over_checkpoints),
+            Column::new("reward_capped".into(), a_capped),
         ])?,
         runs,
     })
@@ -310,6 +318,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
             col("spearman").mean(),
             col("pairwise_accuracy").mean(),
             col("spearman_over_checkpoints").mean(),
+            col("reward_capped").mean(),
             col("spearman").count().alias("runs"),
         ])
         .sort(["env", "pipeline", "method"], Default::default())
@@ -353,6 +362,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
                 spearman: f(&accuracy, "spearman", i),
                 pairwise_accuracy: f(&accuracy, "pairwise_accuracy", i),
                 spearman_over_checkpoints: f(&accuracy, "spearman_over_checkpoints", i),
+                reward_capped: cell_f(&accuracy, "reward_capped", i),
                 runs: n(&accuracy, "runs", i),
             })
             .collect(),

@@ -43,6 +43,9 @@ pub struct AccuracyRow {
     pub spearman: f64,
     pub pairwise_accuracy: f64,
     pub spearman_over_checkpoints: f64,
+    /// With `reward.ceiling`: the mean over runs of the fraction of the members' per-step
+    /// values PPO trained on that the ceiling capped (None without a ceiling).
+    pub reward_capped: Option<f64>,
     pub runs: usize,
 }
 
@@ -81,7 +84,7 @@ impl Row for DemoRow {
 
 impl Row for AccuracyRow {
     fn header() -> Vec<&'static str> {
-        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "runs"]
+        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "reward_capped", "runs"]
     }
     fn cells(&self) -> Vec<Cell> {
         let x = |v: f64| Cell::opt(Some(v), 3);
@@ -93,6 +96,7 @@ impl Row for AccuracyRow {
             x(self.spearman),
             x(self.pairwise_accuracy),
             x(self.spearman_over_checkpoints),
+            Cell::opt(self.reward_capped, 3),
             Cell::int(self.runs),
         ]
     }
@@ -146,12 +150,23 @@ pub fn markdown(t: &Tables) -> String {
         "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
         "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
         "Over checkpoints: Spearman correlation of learned and true return across each PPO run's checkpoints ",
-        "(does climbing the learned reward climb the true one?).\n\n",
+        "(does climbing the learned reward climb the true one?). Capped by the ceiling: the fraction of the learned ",
+        "reward's per-step values PPO trained on that `reward.ceiling` cut (n/a without a ceiling).\n\n",
     ));
     let mut accuracy = Table::of(&t.accuracy);
-    accuracy.columns = ["env", "pipeline", "method", "Pearson", "Spearman", "pairwise accuracy", "Spearman over checkpoints", "runs"]
-        .map(String::from)
-        .to_vec();
+    accuracy.columns = [
+        "env",
+        "pipeline",
+        "method",
+        "Pearson",
+        "Spearman",
+        "pairwise accuracy",
+        "Spearman over checkpoints",
+        "capped by the ceiling",
+        "runs",
+    ]
+    .map(String::from)
+    .to_vec();
     out.push_str(&accuracy.markdown());
     out.push_str(&protocols_markdown(&t.protocols));
     out.push_str(&clones::markdown(&t.clones));
