@@ -22,6 +22,28 @@ fn main() {
     }
     let assets = std::env::var_os("IDREX_DEFAULT_ASSETS").and_then(|d| canon(Path::new(&d)));
     println!("cargo:rustc-env=IDREX_BUILD_ASSETS={}", assets.map(|p| p.display().to_string()).unwrap_or_default());
+    // The commit the binary was built from, as semver build metadata (`0.1.0+3f08a66c1d2e`,
+    // `.dirty` when the sources differ from it): recorded in every manifest it writes, and
+    // shown by `idrex --version` and `exp show`. Empty outside a git checkout.
+    for watched in [".git/HEAD", ".git/index", "src", "Cargo.toml"] {
+        if Path::new(watched).exists() {
+            println!("cargo:rerun-if-changed={watched}");
+        }
+    }
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let commit = git(&["rev-parse", "--short=12", "HEAD"]).map_or(String::new(), |c| {
+        let dirty = git(&["status", "--porcelain", "--untracked-files=no", "--", "src", "build.rs", "Cargo.toml", "Cargo.lock"])
+            .is_some_and(|s| !s.is_empty());
+        format!("+{c}{}", if dirty { ".dirty" } else { "" })
+    });
+    println!("cargo:rustc-env=IDREX_BUILD_COMMIT={commit}");
     // The venv python, for tests and benchmarks that compare with Gymnasium.
     let python = std::env::var_os("IDREX_DEFAULT_PYTHON").map(|p| Path::new(&p).to_path_buf());
     println!("cargo:rustc-env=IDREX_BUILD_PYTHON={}", python.map(|p| p.display().to_string()).unwrap_or_default());

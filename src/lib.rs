@@ -25,3 +25,7 @@ pub mod stats;
 pub mod store;
 
 pub use error::{Error, Result};
+
+/// This build's version with the commit it was built from (`0.1.0+3f08a66c1d2e`; `.dirty`
+/// when its sources differed from that commit), as manifests record it.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), env!("IDREX_BUILD_COMMIT"));

@@ -49,7 +49,7 @@ impl TableArgs {
 }
 
 #[derive(Debug, Parser)]
-#[command(name = "idrex", version, about = "Reward learning from automatically ranked demonstrations (D-REX, iD-REX)")]
+#[command(name = "idrex", version = crate::VERSION, about = "Reward learning from automatically ranked demonstrations (D-REX, iD-REX)")]
 pub struct Cli {
     /// More log output (-v info, -vv debug); RUST_LOG overrides.
     #[arg(short, long, global = true, action = clap::ArgAction::Count)]

@@ -132,7 +132,7 @@ fn run_node(
             started_unix: started,
             ended_unix: now_unix(),
             wall_s,
-            idrex_version: env!("CARGO_PKG_VERSION").to_string(),
+            idrex_version: crate::VERSION.to_string(),
             kernel: Some(node.params.cpu_path()),
             test_set: mark.filter(|_| node.kind() == super::stage::StageKind::Eval).cloned(),
         };
