@@ -153,7 +153,9 @@ pub fn clones_bench(args: &ClonesBenchArgs, p: &Pipeline, store: &Store) -> anyh
             let mut fid = Vec::new();
             for (r, dir) in dirs.iter().enumerate() {
                 let t0 = Instant::now();
+                let cloning = crate::log::progress::Activity::start(format!("bench clones: {group}, {lever:?}, clone {r}"));
                 let made = clone::make(&mut env, dir, step, &cfg, id, node.seed, r, args.threads, crate::nn::Device::Cpu)?;
+                drop(cloning);
                 let seconds = t0.elapsed().as_secs_f64();
                 let fidelity = crate::algo::scoring::Fidelity::of(&made.source_episodes, &made.fidelity_episodes, random);
                 let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;

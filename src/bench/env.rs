@@ -160,7 +160,11 @@ pub fn env_bench(args: &EnvBenchArgs) -> anyhow::Result<()> {
         println!("|---|---|---|---|---|---|---|---|---|---|");
     }
     for id in ids {
-        let b = measure_env(id, args)?;
+        let b = {
+            // Cleared before the row is printed.
+            let _measuring = crate::log::progress::Activity::start(format!("bench env: {}", id.name()));
+            measure_env(id, args)?
+        };
         if args.json {
             println!("{}", serde_json::to_string(&b)?);
         } else {

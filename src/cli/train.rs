@@ -123,7 +123,9 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         .or_else(|| policy.env.clone())
         .with_context(|| format!("{} does not name its environment; pass --env", args.policy.display()))?;
     let id: EnvId = name.parse()?;
+    let evaluating = crate::log::progress::Activity::start(format!("eval: {} episodes of {id}", args.episodes));
     let stats = ppo::evaluate(&policy, id, args.episodes, args.seed)?;
+    drop(evaluating);
     if args.json {
         println!(
             "{}",
