@@ -161,6 +161,13 @@ impl Pipeline {
         };
         let replicates = count(spec.replicates, "replicates", 1.0);
         let first_replicate = count(spec.first_replicate, "first_replicate", 0.0);
+        if spec.iterations > super::config::MAX_ITERATIONS {
+            // Found by the fuzz tests: K = 2075 expands to 39,416 stages.
+            bad(
+                &["iterations"],
+                format!("iterations is {}; give at most {} (the report runs 2 and 3)", spec.iterations, super::config::MAX_ITERATIONS),
+            );
+        }
         let mut positive = |v: usize, keys: &[&str], what: &str| {
             if v == 0 {
                 bad(keys, format!("{what} must be at least 1"));
@@ -432,6 +439,7 @@ mod tests {
             assert!(e.starts_with("p.yaml:3:1: ") && e.contains(why) && e.contains("whole number from 1 to 1000"), "{e}");
         }
         assert!(err("version: 1\nenv: Hopper-v5\nfirst_replicate: -1\n").contains("first_replicate is -1"));
+        assert!(err("version: 1\nenv: Hopper-v5\niterations: 2075\n").contains("p.yaml:3:1: iterations is 2075; give at most 10"));
         assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  backend: tch\n").contains("p.yaml:4:3: ppo.backend tch"));
         assert!(err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      backend: tch\n").contains("ppo.backend tch"));
         assert_eq!(

@@ -278,7 +278,8 @@ pub struct PipelineFile {
     /// The methods to run and report.
     #[serde(default = "default_methods")]
     pub methods: Vec<Method>,
-    /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting).
+    /// K: iD-REX runs iterations 1..K-1 after D-REX (K = 2 is the report's setting; at most
+    /// 10).
     #[serde(default = "default_iterations")]
     pub iterations: usize,
     #[serde(default)]
@@ -365,6 +366,8 @@ impl SlurmConfig {
 
 /// The most replicates one file may ask for.
 pub const MAX_REPLICATES: usize = 1000;
+/// The most iD-REX iterations a file may ask for (the report runs 2 and 3).
+pub const MAX_ITERATIONS: usize = 10;
 
 /// Seeds of replicate `r` are the file's seeds plus `r` times this: far beyond every offset
 /// [`crate::seed::derive`] adds to a stage seed, so no replicate's streams meet another's.
