@@ -41,7 +41,14 @@ impl Error {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io { path: path.into(), source }
     }
+    /// A refusal about a file, on one line: a newline inside the reason (a parser quoting the
+    /// bad value) is written as `\n`.
     pub fn file(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
-        Error::File { path: path.into(), reason: reason.into() }
+        Error::File { path: path.into(), reason: one_line(reason.into()) }
     }
+}
+
+/// `s` with its line breaks escaped, so that a message stays one line.
+pub fn one_line(s: String) -> String {
+    if s.contains(['\n', '\r']) { s.replace('\r', "\\r").replace('\n', "\\n") } else { s }
 }

@@ -27,7 +27,8 @@ pub struct ConfigError {
 
 impl std::fmt::Display for ConfigError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, self.message)?;
+        // Each problem on one line: a quoted value's line breaks are escaped.
+        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, crate::error::one_line(self.message.clone()))?;
         for e in &self.also {
             write!(f, "\n{e}")?;
         }
@@ -439,6 +440,8 @@ mod tests {
             assert!(e.starts_with("p.yaml:3:1: ") && e.contains(why) && e.contains("whole number from 1 to 1000"), "{e}");
         }
         assert!(err("version: 1\nenv: Hopper-v5\nfirst_replicate: -1\n").contains("first_replicate is -1"));
+        // A quoted bad value with a line break stays on the one line (found by the fuzz tests).
+        assert_eq!(err("version: 1\nenv: Hopper-v5\nmethods: [\"drex\\nx\"]\n").lines().count(), 1);
         assert!(err("version: 1\nenv: Hopper-v5\niterations: 2075\n").contains("p.yaml:3:1: iterations is 2075; give at most 10"));
         assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  backend: tch\n").contains("p.yaml:4:3: ppo.backend tch"));
         assert!(err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      backend: tch\n").contains("ppo.backend tch"));
