@@ -7,6 +7,8 @@
 #                                      and `weed mini` (S3 on 127.0.0.1:$IDREX_S3_PORT), all
 #                                      state under DIR; prints the environment to use them
 #   scripts/services.sh stop DIR       stops what start started, by the pids under DIR
+#   scripts/services.sh s3-stop DIR    kills the S3 server alone (kill -9, as a crash would)
+#   scripts/services.sh s3-start DIR   starts it again on the data it had
 # Facts this relies on: ../shared/scale-out.md (Slurm 22.05 on Debian 12, weed 4.48).
 set -euo pipefail
 
@@ -97,18 +99,41 @@ CONF
   slurmd
   wait_for 20 "the Slurm node" bash -c "sinfo --noheader --format=%t | grep -q idle"
 
+  start_s3 "$dir"
+}
+
+start_s3() {  # start_s3 DIR: weed alone (also to restart it on its old data)
+  local dir="$1"
+  [ -x "$weed_env/bin/weed" ] || die "SeaweedFS is not installed; run scripts/services.sh install"
+  (exec 3<>"/dev/tcp/127.0.0.1/$s3_port") 2>/dev/null && die "port $s3_port is in use (an S3 server already running?); stop it first"
+  mkdir -p "$dir/weed"
+  dir="$(cd "$dir" && pwd)"
   # The environment's keys become the S3 login. Detached from this script's output, so
   # that a caller reading it sees its end.
   (cd "$dir/weed" && AWS_ACCESS_KEY_ID="$IDREX_S3_KEY" AWS_SECRET_ACCESS_KEY="$IDREX_S3_SECRET" \
     exec "$weed_env/bin/weed" mini -dir="$dir/weed" -ip=127.0.0.1 -ip.bind=127.0.0.1 -admin.ui=false \
       -webdav=false -s3.port="$s3_port" -s3.port.iceberg=0 -master.telemetry=false -bucket=idrex \
-      </dev/null >"$dir/weed.log" 2>&1) &
+      </dev/null >>"$dir/weed.log" 2>&1) &
   echo $! >"$dir/weed.pid"
   wait_for 30 "SeaweedFS's S3 port" bash -c "exec 3<>/dev/tcp/127.0.0.1/$s3_port"
   # The bucket appears up to a second after the port opens (a bucket is a directory of the
   # filer, which answers unauthenticated on loopback).
   wait_for 30 "the idrex bucket" bash -c \
     "curl -sf -H 'Accept: application/json' http://127.0.0.1:8888/buckets/ | grep -q '\"/buckets/idrex\"'"
+}
+
+stop_s3() {  # stop_s3 DIR: kill -9 weed (as a crash would) and wait until its ports are free
+  local dir="$1" pid
+  pid="$(cat "$dir/weed.pid" 2>/dev/null)" || return 0
+  case "$(basename "$(readlink "/proc/$pid/exe" 2>/dev/null)")" in weed*) ;; *) return 0 ;; esac
+  kill -KILL "$pid" 2>/dev/null || true
+  for _ in $(seq 100); do
+    [ -e "/proc/$pid" ] && [ "$(cut -d' ' -f3 "/proc/$pid/stat" 2>/dev/null)" != Z ] || break
+    sleep 0.1
+  done
+  for port in "$s3_port" 8888 9333; do
+    for _ in $(seq 100); do (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null || break; sleep 0.1; done
+  done
 }
 
 stop() {
@@ -140,5 +165,7 @@ case "${1:-}" in
   install) install ;;
   start) [ -n "${2:-}" ] || die "usage: services.sh start DIR"; : "${IDREX_S3_KEY:?set IDREX_S3_KEY}" "${IDREX_S3_SECRET:?set IDREX_S3_SECRET}"; start "$2" ;;
   stop) [ -n "${2:-}" ] || die "usage: services.sh stop DIR"; stop "$2" ;;
-  *) die "usage: services.sh install | start DIR | stop DIR" ;;
+  s3-start) [ -n "${2:-}" ] || die "usage: services.sh s3-start DIR"; : "${IDREX_S3_KEY:?set IDREX_S3_KEY}" "${IDREX_S3_SECRET:?set IDREX_S3_SECRET}"; start_s3 "$2" ;;
+  s3-stop) [ -n "${2:-}" ] || die "usage: services.sh s3-stop DIR"; stop_s3 "$2" ;;
+  *) die "usage: services.sh install | start DIR | stop DIR | s3-start DIR | s3-stop DIR" ;;
 esac

@@ -12,6 +12,8 @@ use std::time::{Duration, Instant};
 
 use idrex::store::{Location, Store};
 
+#[path = "s3_proxy.rs"]
+mod s3_proxy;
 #[path = "util.rs"]
 mod util;
 
@@ -46,6 +48,32 @@ fn idrex(dir: &Path, args: &[&str]) -> Output {
 
 fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// idrex with extra environment variables (a proxy's endpoint, a cache of its own).
+fn idrex_with(dir: &Path, args: &[&str], vars: &[(&str, String)]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_idrex"));
+    c.args(args).current_dir(dir);
+    for (k, v) in vars {
+        c.env(k, v);
+    }
+    c.output().expect("run idrex")
+}
+
+/// The number of retries an idrex run logged.
+fn retries_logged(o: &Output) -> usize {
+    String::from_utf8_lossy(&o.stderr).lines().filter(|l| l.contains("; retry ")).count()
+}
+
+fn services(svc: &Path, what: &str) {
+    let o = Command::new(repo("scripts/services.sh"))
+        .arg(what)
+        .arg(svc)
+        .env("IDREX_S3_KEY", KEY)
+        .env("IDREX_S3_SECRET", SECRET)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "services.sh {what}: {}", text(&o));
 }
 
 fn ok(o: Output) -> String {
@@ -240,6 +268,122 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     let status = wait_settled(&base, slow, &s3("c"), limit);
     assert!(status.lines().last().unwrap().ends_with("28 stored"), "{status}");
 
+    // 4b. A job that fails (its process killed, as the kernel's OOM killer would): it and
+    // what depends on it show as failed, and a resubmission completes the pipeline.
+    let out = ok(idrex(&base, &["pipeline", "run", slow, "--store", &s3("e"), "--executor", "slurm", "--log-dir", "logs-e"]));
+    assert_eq!(submitted(&out).len(), 28, "{out}");
+    let start = Instant::now();
+    while !ok(idrex(&base, &["pipeline", "status", slow, "--store", &s3("e")]))
+        .lines()
+        .any(|l| l.contains("demonstrator") && l.contains("running"))
+    {
+        assert!(start.elapsed() < limit, "the demonstrator job never ran");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    let pattern = format!("{} stage run ", env!("CARGO_BIN_EXE_idrex"));
+    assert!(Command::new("pkill").args(["-KILL", "-f", &pattern]).status().unwrap().success(), "no stage process to kill");
+    let status = wait_settled(&base, slow, &s3("e"), limit);
+    assert!(status.lines().last().unwrap().ends_with("28 failed"), "{status}");
+    let out = ok(idrex(&base, &["pipeline", "run", slow, "--store", &s3("e"), "--executor", "slurm", "--log-dir", "logs-e"]));
+    assert_eq!(submitted(&out).len(), 28, "{out}");
+    let status = wait_settled(&base, slow, &s3("e"), limit);
+    assert!(status.lines().last().unwrap().ends_with("28 stored"), "{status}");
+    assert!(ok(idrex(&base, &["verify", "--store", &s3("e")])).contains("28 artifacts, 0 corrupt"));
+    println!("slurm faults: a cancelled job (c) and a killed job (e) each failed their dependents, and a resubmission completed 28 of 28");
+
+    // 4c. A replicated study (replicates: 3) as Slurm jobs into the bucket, with each new
+    // replicate's first node submitted twice more by hand while its pipeline job waits or
+    // runs: the duplicates are harmless, and every digest equals a local run's.
+    let replicated = base.join("replicated.yaml");
+    std::fs::write(&replicated, std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap() + "replicates: 3\n").unwrap();
+    let replicated = replicated.to_str().unwrap();
+    ok(idrex(&base, &["pipeline", "run", replicated, "--store", "local3", "--jobs", "2"]));
+    let local3 = digests(&Store::at(base.join("local3")));
+    // Replicate 0 keeps the file's seeds: its nodes but the evaluations (which record their
+    // replicate) are the smoke run's, stored already.
+    let shared = local3.keys().filter(|k| reference.contains_key(*k)).count();
+    let n3 = local3.len();
+    assert!(n3 >= 84 && shared > 0, "{n3} nodes, {shared} shared with the smoke run");
+    let out = ok(idrex(&base, &["pipeline", "run", replicated, "--store", &s3("a"), "--executor", "slurm", "--log-dir", "logs-r"]));
+    assert_eq!(submitted(&out).len(), n3 - shared, "what the bucket lacks is submitted:\n{out}");
+    let roots: Vec<String> = out
+        .lines()
+        .filter(|l| l.starts_with("submitted ") && l.split_whitespace().nth(1).is_some_and(|n| n.ends_with("demonstrator")))
+        .map(|l| l.split_whitespace().nth(2).unwrap().to_string())
+        .collect();
+    assert!(!roots.is_empty(), "{out}");
+    let remote = idrex::store::s3::Remote::connect(BUCKET, "a").unwrap();
+    let defs = remote.submitted().unwrap();
+    let store_url = s3("a");
+    let mut duplicates = Vec::new();
+    for short in &roots {
+        let key = defs.iter().find(|k| k.starts_with(short.as_str())).expect("the root's definition");
+        for n in 0..2 {
+            let wrap = format!("--wrap=exec {} stage run {key} --store {store_url}", env!("CARGO_BIN_EXE_idrex"));
+            let log = base.join(format!("logs-r/duplicate-{short}-{n}-%j.out"));
+            let o = Command::new("sbatch")
+                .args(["--parsable", "--cpus-per-task=1", &format!("--output={}", log.display()), &wrap])
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", text(&o));
+            duplicates.push(String::from_utf8_lossy(&o.stdout).trim().to_string());
+        }
+    }
+    // And once more at once from "another machine" (a cache of its own), outside Slurm:
+    // it races the node's own job, which starts a scheduler cycle later.
+    let racers: Vec<_> = roots
+        .iter()
+        .map(|short| {
+            let key = defs.iter().find(|k| k.starts_with(short.as_str())).unwrap();
+            Command::new(env!("CARGO_BIN_EXE_idrex"))
+                .args(["stage", "run", key, "--store", &store_url])
+                .env("IDREX_S3_CACHE", base.join("cache-racer"))
+                .current_dir(&base)
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .unwrap()
+        })
+        .collect();
+    let raced: Vec<String> = racers.into_iter().map(|c| ok(c.wait_with_output().unwrap())).collect();
+    let status = wait_settled(&base, replicated, &s3("a"), Duration::from_secs(600));
+    assert!(status.lines().last().unwrap().ends_with(&format!("{n3} stored")), "{status}");
+    let start = Instant::now();
+    while Command::new("squeue")
+        .args(["--noheader", "--jobs", &duplicates.join(",")])
+        .output()
+        .map(|o| !o.stdout.is_empty())
+        .unwrap_or(false)
+    {
+        assert!(start.elapsed() < limit, "duplicate jobs still queued");
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let dup_logs: Vec<String> = std::fs::read_dir(base.join("logs-r"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("duplicate-"))
+        .map(|e| std::fs::read_to_string(e.path()).unwrap_or_default())
+        .collect();
+    assert_eq!(dup_logs.len(), 2 * roots.len());
+    let dup_logs: Vec<String> = dup_logs.into_iter().chain(raced).collect();
+    for l in &dup_logs {
+        assert!(l.contains("already stored") || l.contains("computed in"), "a duplicate job did not finish cleanly:\n{l}");
+    }
+    let in_bucket = digests(&s3_store("a"));
+    for (key, files) in &local3 {
+        assert_eq!(in_bucket.get(key), Some(files), "a replicated study through Slurm into S3 made other bytes than a local run for {key}");
+    }
+    let total = in_bucket.len();
+    assert_eq!(total, 28 + n3 - shared);
+    assert!(ok(idrex(&base, &["verify", "--store", &s3("a")])).contains(&format!("{total} artifacts, 0 corrupt")));
+    let computed = dup_logs.iter().filter(|l| l.contains("computed in")).count();
+    println!(
+        "slurm: replicates: 3 as {} jobs plus {} duplicates of their roots (2 each as Slurm jobs, 1 each at once outside Slurm; {computed} of them computed the node too) = a local run's {n3} digests",
+        n3 - shared,
+        dup_logs.len()
+    );
+
     // 5. Mistakes in the connection: one line that names the problem, never the secret.
     let status = |vars: &[(&str, &str)]| {
         let mut c = Command::new(env!("CARGO_BIN_EXE_idrex"));
@@ -253,7 +397,9 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
         (vec![("AWS_SECRET_ACCESS_KEY", "wrong-secret")], "refused the credentials"),
         (vec![("AWS_ENDPOINT_URL", "http://127.0.0.1:9")], "cannot reach http://127.0.0.1:9"),
     ] {
+        let started = Instant::now();
         let o = status(&vars);
+        assert!(started.elapsed() < Duration::from_secs(10), "took {:?} to give up", started.elapsed());
         let err = String::from_utf8_lossy(&o.stderr).into_owned();
         assert!(!o.status.success(), "{err}");
         assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
@@ -261,16 +407,168 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
         assert!(!err.contains(SECRET) && !err.contains("wrong-secret"), "a secret in the message: {err}");
     }
 
+    // A run with a wrong secret: one line, and nothing written to its prefix.
+    let o = idrex_with(&base, &["pipeline", "run", smoke, "--store", &s3("w")], &[("AWS_SECRET_ACCESS_KEY", "wrong-secret".into())]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success() && err.trim().lines().count() == 1 && err.contains("refused the credentials"), "{err}");
+    assert!(idrex::store::s3::Remote::connect(BUCKET, "w").unwrap().list("").unwrap().is_empty(), "a refused run wrote to its prefix");
+
+    s3_load(&base, smoke, &reference);
+    s3_faults(&base, smoke, &reference);
+    s3_server_killed(&base, &svc, smoke, &reference);
+
     // gc on the bucket keeps what a pipeline names and removes the rest; what stays is intact.
-    let gc = ok(idrex(&base, &["gc", smoke, "--store", &s3("a"), "--yes"]));
+    let gc = ok(idrex(&base, &["gc", smoke, replicated, "--store", &s3("a"), "--yes"]));
     assert!(gc.contains("0 artifacts removed"), "{gc}");
     let one_seed = base.join("one-seed.yaml");
     std::fs::write(&one_seed, std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap().replace("seeds: [0, 1]", "seeds: [0]"))
         .unwrap();
     let gc = ok(idrex(&base, &["gc", one_seed.to_str().unwrap(), "--store", &s3("a"), "--yes"]));
     let removed: usize = gc.lines().last().unwrap().split_whitespace().next().unwrap().parse().unwrap();
-    assert!(removed > 0 && removed < 28, "{gc}");
+    assert!(removed > 0 && removed < total, "{gc}");
     let verified = ok(idrex(&base, &["verify", "--store", &s3("a")]));
-    assert!(verified.contains(&format!("{} artifacts, 0 corrupt", 28 - removed)), "{verified}");
+    assert!(verified.contains(&format!("{} artifacts, 0 corrupt", total - removed)), "{verified}");
     true
+}
+
+type Digests = BTreeMap<String, Vec<(String, String)>>;
+
+/// Requests dropped, answered 503, stalled past the timeout, and cut off in either direction
+/// (a proxy in front of the server): the run rides them out with logged retries and stores
+/// a local run's bytes; verify and a report, reading every blob back through the same
+/// faults from an empty cache, find them intact.
+fn s3_faults(base: &Path, smoke: &str, reference: &Digests) {
+    let proxy = s3_proxy::Proxy::start(8333, 0.2, 4, Duration::from_secs(8), 7);
+    let via = |cache: &str| {
+        vec![
+            ("AWS_ENDPOINT_URL", format!("http://127.0.0.1:{}", proxy.port)),
+            ("IDREX_S3_TIMEOUT", "3".to_string()),
+            ("IDREX_S3_CACHE", base.join(cache).display().to_string()),
+        ]
+    };
+    let started = Instant::now();
+    let run = idrex_with(base, &["pipeline", "run", smoke, "--store", &s3("f"), "--jobs", "2"], &via("cache-f"));
+    let run_retries = retries_logged(&run);
+    let out = ok(run);
+    assert!(out.contains(" 28 computed") && out.contains("requests retried"), "{out}");
+    assert_eq!(&digests(&s3_store("f")), reference, "a run through faults stored other bytes");
+    let verify = idrex_with(base, &["verify", "--store", &s3("f")], &via("cache-f-verify"));
+    let verify_retries = retries_logged(&verify);
+    assert!(ok(verify).contains("28 artifacts, 0 corrupt"));
+    let report = idrex_with(base, &["report", "--store", &s3("f"), "--out", "report-f"], &via("cache-f-report"));
+    let report_retries = retries_logged(&report);
+    assert!(ok(report).contains("| Hopper-v5 | smoke |"));
+    let injected = proxy.injected();
+    for (fault, n) in &injected {
+        assert!(*n > 0, "no {fault:?} fault was injected: {injected:?}");
+    }
+    println!(
+        "s3 faults: {} requests, {} faults injected {injected:?}; retries logged: run {run_retries}, verify {verify_retries}, report {report_retries}; {:.0} s; digests equal to a local run's",
+        proxy.requests(),
+        proxy.total_injected(),
+        started.elapsed().as_secs_f64()
+    );
+    assert!(run_retries + verify_retries + report_retries > 0);
+}
+
+/// The S3 server killed (kill -9) while a run publishes, and restarted 3 s later. The run
+/// either rides it out on its retries or ends with one clear error; either way nothing
+/// half-written is published (verify is clean), and a re-run completes with a local run's
+/// bytes.
+fn s3_server_killed(base: &Path, svc: &Path, smoke: &str, reference: &Digests) {
+    let log = base.join("killed.log");
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
+        .args(["pipeline", "run", smoke, "--store", &s3("k"), "--jobs", "2"])
+        .env("IDREX_S3_CACHE", base.join("cache-k"))
+        .current_dir(base)
+        .stdout(std::fs::File::create(base.join("killed.out")).unwrap())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let remote = idrex::store::s3::Remote::connect(BUCKET, "k").unwrap();
+    while remote.keys().unwrap().len() < 8 {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was killed");
+        assert!(started.elapsed() < Duration::from_secs(240), "no 8 artifacts published within 240 s");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let published_before = remote.keys().unwrap().len();
+    services(svc, "s3-stop");
+    std::thread::sleep(Duration::from_secs(3));
+    services(svc, "s3-start");
+    let status = child.wait().unwrap();
+    let err = std::fs::read_to_string(&log).unwrap();
+    let retries = err.lines().filter(|l| l.contains("; retry ")).count();
+    let outcome = if status.success() {
+        assert_eq!(&digests(&s3_store("k")), reference, "a run through a server restart stored other bytes");
+        "rode it out"
+    } else {
+        let failed: Vec<&str> = err.lines().filter(|l| l.starts_with("failed: ")).collect();
+        assert!(!failed.is_empty() && failed.iter().all(|l| l.contains("cannot reach")), "not one clear error per stage:\n{err}");
+        "failed clearly"
+    };
+    let verified = ok(idrex(base, &["verify", "--store", &s3("k")]));
+    assert!(verified.contains(" 0 corrupt"), "{verified}");
+    let rerun = ok(idrex_with(
+        base,
+        &["pipeline", "run", smoke, "--store", &s3("k"), "--jobs", "2"],
+        &[("IDREX_S3_CACHE", base.join("cache-k").display().to_string())],
+    ));
+    assert!(rerun.contains("0 failed"), "{rerun}");
+    assert_eq!(&digests(&s3_store("k")), reference, "after a server restart and a re-run, other bytes than a local run's");
+    println!(
+        "s3 killed: the server was killed after {published_before} of 28 artifacts and back 3 s later; the run {outcome} with {retries} retries logged; verify clean; {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// Load on a bucket: eight runs at once from two machines' caches (four runs each: the
+/// smoke file and its one-seed subset in turn), with verify and gc called beside them. Every
+/// run ends, nothing is corrupt, gc removes nothing a pipeline names, and the bucket holds a
+/// local run's bytes.
+fn s3_load(base: &Path, smoke: &str, reference: &Digests) {
+    let one_seed = base.join("load-one-seed.yaml");
+    std::fs::write(&one_seed, std::fs::read_to_string(smoke).unwrap().replace("seeds: [0, 1]", "seeds: [0]")).unwrap();
+    let one_seed_s = one_seed.to_str().unwrap().to_string();
+    let dir = base.join("load");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut beside = 0;
+    let mut last = Instant::now();
+    let started = Instant::now();
+    let outs = util::runs_at_once(
+        &dir,
+        &s3("l"),
+        &[PathBuf::from(smoke), one_seed],
+        8,
+        &|i| vec![("IDREX_S3_CACHE".into(), base.join(format!("cache-l{}", i % 2)).display().to_string())],
+        Duration::from_secs(900),
+        &mut || {
+            if last.elapsed() < Duration::from_secs(2) {
+                return;
+            }
+            let v = ok(idrex(base, &["verify", "--store", &s3("l")]));
+            assert!(v.contains(" 0 corrupt"), "{v}");
+            let g = ok(idrex(base, &["gc", smoke, &one_seed_s, "--store", &s3("l"), "--yes"]));
+            assert!(g.contains("0 artifacts removed"), "{g}");
+            beside += 1;
+            last = Instant::now();
+        },
+    );
+    let computed: usize = outs.iter().map(|o| util::computed(o)).sum();
+    let stored = digests(&s3_store("l"));
+    let nodes = stored.len();
+    // The two files share every node but the iD-REX ones, which rank all the seeds' runs.
+    assert!(
+        nodes > 28 && (nodes..=2 * nodes).contains(&computed),
+        "two machines compute each of {nodes} nodes at most once each: {computed}"
+    );
+    for (key, files) in reference {
+        assert_eq!(stored.get(key), Some(files), "eight runs at once stored other bytes than a local run for {key}");
+    }
+    assert!(ok(idrex(base, &["verify", "--store", &s3("l")])).contains(&format!("{nodes} artifacts, 0 corrupt")));
+    println!(
+        "load (s3): 8 runs from 2 caches, {computed} computations of {nodes} nodes, verify and gc beside them {} times (clean, nothing named removed); {:.0} s",
+        beside,
+        started.elapsed().as_secs_f64()
+    );
 }

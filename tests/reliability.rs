@@ -222,3 +222,57 @@ ls "$d/store/.tmp" | grep -v '\.lock$' | wc -l | sed 's/^/staging left /'
     assert!(text.contains("verify exit 0"), "nothing partial was published: {text}");
     assert!(text.contains("staging left 0"), "failed stages left no staging behind: {text}");
 }
+
+/// Load on a local store: eight pipeline runs at once (four of the smoke file, four of its
+/// one-seed subset), with `verify` and `gc` called in a loop beside them. Every run ends
+/// well within its limit, each node is computed once in all (the others wait on its lock
+/// and reuse it), verify never finds a corrupt artifact, gc refuses while runs use the store
+/// (and, when it gets to run, removes nothing a pipeline names), and the store ends intact.
+#[test]
+fn eight_runs_with_gc_and_verify_beside_them_share_a_local_store() {
+    let dir = TempDir::new("load");
+    let smoke = repo("pipelines/smoke.yaml");
+    let one_seed = dir.join("one-seed.yaml");
+    let text = std::fs::read_to_string(&smoke).unwrap();
+    assert!(text.contains("seeds: [0, 1]"));
+    std::fs::write(&one_seed, text.replace("seeds: [0, 1]", "seeds: [0]")).unwrap();
+    let store = dir.join("store");
+    let store_s = store.to_str().unwrap().to_string();
+    let (mut verified, mut gc_refused, mut gc_ran) = (0, 0, 0);
+    let started = std::time::Instant::now();
+    let outs = crate::util::runs_at_once(
+        dir.path(),
+        &store_s,
+        &[smoke.clone(), one_seed.clone()],
+        8,
+        &|_| vec![],
+        std::time::Duration::from_secs(900),
+        &mut || {
+            if store.join(".locks").exists() {
+                let v = idrex(&["verify", "--store", &store_s]);
+                assert!(v.status.success() && crate::util::stdout(&v).contains(" 0 corrupt"), "{}{}", crate::util::stdout(&v), stderr(&v));
+                verified += 1;
+                let g = idrex(&["gc", smoke.to_str().unwrap(), one_seed.to_str().unwrap(), "--store", &store_s, "--yes"]);
+                if g.status.success() {
+                    assert!(crate::util::stdout(&g).contains("0 artifacts removed"), "{}", crate::util::stdout(&g));
+                    gc_ran += 1;
+                } else {
+                    assert!(stderr(&g).contains("is using the store"), "{}", stderr(&g));
+                    gc_refused += 1;
+                }
+            }
+        },
+    );
+    let computed: usize = outs.iter().map(|o| crate::util::computed(o)).sum();
+    // The two files share every node but the iD-REX ones, which rank all the seeds' runs.
+    let nodes = std::fs::read_dir(&store).unwrap().flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count();
+    assert!(nodes > 28, "{nodes}");
+    assert_eq!(computed, nodes, "each node computed once in all:\n{}", outs.join("\n"));
+    let v = idrex(&["verify", "--store", &store_s]);
+    assert!(crate::util::stdout(&v).contains(&format!("{nodes} artifacts, 0 corrupt")), "{}", crate::util::stdout(&v));
+    assert!(verified > 0 && gc_refused > 0, "verify {verified}, gc refused {gc_refused}");
+    println!(
+        "load (local): 8 runs, {nodes} nodes computed once in all, verify beside them {verified} times (clean), gc refused {gc_refused} times and ran {gc_ran}; {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+}

@@ -68,3 +68,69 @@ pub fn stdout(o: &Output) -> String {
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// Load: `runs` pipeline runs on one store at once (`files` in turn; run `i` gets the
+/// environment `vars(i)`), in `dir`, while `beside` is called in a loop until they have all
+/// ended. Panics when a run fails or outlasts `limit`; returns each run's stdout.
+pub fn runs_at_once(
+    dir: &Path,
+    store: &str,
+    files: &[PathBuf],
+    runs: usize,
+    vars: &dyn Fn(usize) -> Vec<(String, String)>,
+    limit: std::time::Duration,
+    beside: &mut dyn FnMut(),
+) -> Vec<String> {
+    let start = std::time::Instant::now();
+    let mut children: Vec<_> = (0..runs)
+        .map(|i| {
+            let file = files[i % files.len()].to_str().unwrap().to_string();
+            let rec = dir.join(format!("load-{i}.rrd"));
+            let mut c = Command::new(env!("CARGO_BIN_EXE_idrex"));
+            c.args(["pipeline", "run", &file, "--store", store, "--jobs", "1", "--recording", rec.to_str().unwrap()]).current_dir(dir);
+            for (k, v) in vars(i) {
+                c.env(k, v);
+            }
+            let out = std::fs::File::create(dir.join(format!("load-{i}.out"))).unwrap();
+            let err = std::fs::File::create(dir.join(format!("load-{i}.err"))).unwrap();
+            Some(c.stdout(out).stderr(err).spawn().unwrap())
+        })
+        .collect();
+    loop {
+        let mut alive = 0;
+        for (i, slot) in children.iter_mut().enumerate() {
+            let Some(child) = slot else { continue };
+            match child.try_wait().unwrap() {
+                None => alive += 1,
+                Some(status) => {
+                    let err = std::fs::read_to_string(dir.join(format!("load-{i}.err"))).unwrap_or_default();
+                    assert!(status.success(), "run {i} failed:\n{err}");
+                    *slot = None;
+                }
+            }
+        }
+        if alive == 0 {
+            break;
+        }
+        if start.elapsed() > limit {
+            for c in children.iter_mut().flatten() {
+                let _ = c.kill();
+            }
+            panic!("{alive} of {runs} runs still going after {limit:?}: a run waits forever");
+        }
+        beside();
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    (0..runs).map(|i| std::fs::read_to_string(dir.join(format!("load-{i}.out"))).unwrap()).collect()
+}
+
+/// The stages a run computed, from its summary line (`NAME: N stages, C computed, ...`).
+pub fn computed(stdout: &str) -> usize {
+    stdout
+        .lines()
+        .find_map(|l| {
+            let rest = l.split(" stages, ").nth(1)?;
+            rest.split(" computed").next()?.trim().parse().ok()
+        })
+        .unwrap_or_else(|| panic!("no summary line in:\n{stdout}"))
+}

@@ -354,6 +354,8 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     }
     // Before any stage runs: a pipeline planned for CUDA on a machine without it.
     p.device.ensure_available().map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
+    // In use until the recordings are written (they read the stored artifacts): gc waits.
+    let _using = store.in_use()?;
     tracing::info!("BC, T-REX and the learned reward compute on {}", p.device.name());
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true, test_set };
@@ -374,6 +376,9 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         count(&|s| matches!(s, Status::Skipped { .. })),
         started.elapsed().as_secs_f64()
     );
+    if store.retried() > 0 {
+        println!("{}: {} requests retried (each is in the log above)", store.location(), store.retried());
+    }
     // One recording per environment: each env's nodes under their names within it.
     let mut recordings = Vec::new();
     for &env in &p.envs {

@@ -4,7 +4,7 @@ use clap::{Args, Subcommand};
 
 use crate::pipeline::graph::Node;
 use crate::pipeline::runner::{self, Status};
-use crate::pipeline::stage::{self, Params, StageKind};
+use crate::pipeline::stage::{self, Inputs, Params, StageKind};
 use crate::store::{Location, Store, key};
 
 #[derive(Debug, Subcommand)]
@@ -49,7 +49,8 @@ pub fn run(cmd: &StageCommand) -> anyhow::Result<()> {
         .threads
         .or_else(|| std::env::var("SLURM_CPUS_PER_TASK").ok().and_then(|c| c.parse().ok()))
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let node = Node { name: def.node.clone(), params, seed: def.seed, inputs: vec![] };
+    let inputs = Inputs::from_recorded(kind, &def.node, def.inputs.iter().map(|(role, key)| (role, key.clone())))?;
+    let node = Node { name: def.node.clone(), params, seed: def.seed, inputs };
     let body = |n: &Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
     let progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
     match runner::run_one(&node, &args.key, def.inputs.clone(), &store, threads, progress, &body) {
@@ -59,6 +60,9 @@ pub fn run(cmd: &StageCommand) -> anyhow::Result<()> {
         }
         Status::Failed { error, log } => bail!("{} ({}) failed: {error}; log: {}", def.node, &args.key[..12], log.display()),
         Status::Skipped { because } => bail!("{} skipped because of {because}", def.node),
+    }
+    if store.retried() > 0 {
+        println!("{}: {} requests retried", store.location(), store.retried());
     }
     Ok(())
 }

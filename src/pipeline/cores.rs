@@ -98,13 +98,13 @@ mod tests {
             name: name.into(),
             params: Params::Bc(stage::bc::BcParams { env: crate::env::EnvId::Hopper, bc: Default::default(), device: Default::default() }),
             seed: 0,
-            inputs: Default::default(),
+            inputs: stage::Inputs::Bc(stage::BcInputs { demos: "demos".into() }),
         };
         let t = Node {
             name: "t".into(),
             params: Params::Demos(stage::demos::DemosParams { env: crate::env::EnvId::Hopper, episodes: 1 }),
             seed: 0,
-            inputs: Default::default(),
+            inputs: stage::Inputs::Demos(stage::DemosInputs { policy: "demonstrator".into() }),
         };
         let (a, b) = (bc("a"), bc("b"));
         // Alone on an idle machine, BC gets every core; beside another stage, its share.

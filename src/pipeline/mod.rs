@@ -11,6 +11,7 @@
 pub mod config;
 pub mod cores;
 pub mod graph;
+pub mod inputs;
 pub mod kind;
 pub mod load;
 pub mod plots;

@@ -181,7 +181,8 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
                 }
                 // Unseen rollouts scored by the reward this run trained on.
                 if let Some(acc) = &x.reward
-                    && let Some((_, src)) = n.inputs.iter().find(|(role, _)| *role == crate::pipeline::role::Role::Reward)
+                    && let super::stage::Inputs::Eval(i) = &n.inputs
+                    && let Some(src) = &i.reward
                 {
                     let entry = unseen.entry(entity(src)).or_insert_with(|| (src.clone(), vec![], vec![]));
                     entry.1.extend(&x.summary.returns);

@@ -31,11 +31,10 @@ pub fn recompute(store: &Store, key: &str, threads: usize) -> Result<Recomputed>
     let m = store.check(key).map_err(|problem| Error::Invalid(format!("artifact {key} is corrupt: {problem}")))?;
     let kind = StageKind::parse(&m.kind).ok_or_else(|| Error::Invalid(format!("artifact {key}: unknown stage kind '{}'", m.kind)))?;
     let params = Params::from_json(kind, &m.params)?;
-    let mut inputs = BTreeMap::new();
     for (role, k) in &m.inputs {
         store.check(k).map_err(|problem| Error::Invalid(format!("input {role} ({k}) of {key} is corrupt: {problem}")))?;
-        inputs.insert(super::role::Role::recorded(role, &format!("artifact {key}"))?, store.input_dir(k)?);
     }
+    let inputs = stage::Inputs::from_recorded(kind, &format!("artifact {key}"), m.inputs.iter())?.try_map(|k| store.input_dir(k))?;
     let scratch = store.stage(&format!("recompute-{key}"))?;
     let bar = indicatif::ProgressBar::hidden();
     let ctx = StageCtx { seed: m.seed, inputs, out: &scratch.dir, threads, progress: &bar };

@@ -10,8 +10,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::Value;
 
 use super::graph::{Graph, Node};
-use super::role::Role;
-use super::stage::StageCtx;
+use super::stage::{Inputs, StageCtx};
 use crate::error::{Error, Result};
 use crate::store::{Manifest, Store, TestSetMark, now_unix};
 
@@ -99,8 +98,7 @@ fn run_node(
         // A forced node is computed to the side; the stored artifact stays until the new one
         // replaces it.
         // An S3 store's inputs are downloaded into its local cache (and checked) first.
-        let input_dirs =
-            inputs.iter().map(|(name, k)| Ok((Role::recorded(name, &node.name)?, store.input_dir(k)?))).collect::<Result<_>>()?;
+        let input_dirs = Inputs::from_recorded(node.kind(), &node.name, inputs.iter())?.try_map(|k| store.input_dir(k))?;
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();
@@ -211,7 +209,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                     continue;
                 }
                 if let Some((_, bad)) =
-                    n.inputs.iter().find(|(_, i)| matches!(status.get(i), Some(Status::Failed { .. } | Status::Skipped { .. })))
+                    n.inputs.iter().find(|(_, i)| matches!(status.get(*i), Some(Status::Failed { .. } | Status::Skipped { .. })))
                 {
                     status.insert(n.name.clone(), Status::Skipped { because: bad.clone() });
                     overall.inc(1);
@@ -304,29 +302,37 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::role::Series;
-    use crate::pipeline::stage::{Params, demos::DemosParams};
+    use crate::pipeline::stage::idrex::action_noise;
+    use crate::pipeline::stage::{ActionNoiseInputs, Params};
 
     /// A test stage, run by [`body`] instead of a stage kind's code: it writes its value plus
-    /// its inputs' values (read as a series of sets). A kind's parameters carry it (`episodes` is the value, so that it
-    /// is in the key), and its seed says how long it sleeps and whether it fails.
+    /// its inputs' values. It borrows the shape of a kind whose inputs are a plain series (its
+    /// parameters carry the value as `rollouts_per_level`, so that it is in the key), and
+    /// its seed says how long it sleeps and whether it fails.
     fn node(name: &str, value: i64, inputs: &[&str], sleep_ms: u64, fail: bool) -> Node {
         Node {
             name: name.into(),
-            params: Params::Demos(DemosParams { env: crate::env::EnvId::Hopper, episodes: value as usize }),
+            params: Params::ActionNoiseRollouts(action_noise::Params {
+                env: crate::env::EnvId::Hopper,
+                sigmas: vec![],
+                noise: Default::default(),
+                rollouts_per_level: value as usize,
+            }),
             seed: 2 * sleep_ms + fail as u64,
-            inputs: inputs.iter().enumerate().map(|(i, s)| (Series::Set.at(i), s.to_string())).collect(),
+            inputs: Inputs::ActionNoiseRollouts(ActionNoiseInputs { policies: inputs.iter().map(|s| s.to_string()).collect() }),
         }
     }
 
     fn body(n: &Node, ctx: &StageCtx) -> Result<Value> {
-        let Params::Demos(p) = &n.params else { unreachable!("test nodes carry demos parameters") };
+        let (Params::ActionNoiseRollouts(p), Inputs::ActionNoiseRollouts(inputs)) = (&n.params, &ctx.inputs) else {
+            unreachable!("test nodes are of one shape")
+        };
         std::thread::sleep(std::time::Duration::from_millis(n.seed / 2));
         if n.seed % 2 == 1 {
             return Err(Error::Invalid("this test stage was asked to fail".into()));
         }
-        let mut v = p.episodes as i64;
-        for dir in ctx.numbered(Series::Set) {
+        let mut v = p.rollouts_per_level as i64;
+        for dir in &inputs.policies {
             let path = dir.join("value.txt");
             v += std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?.trim().parse::<i64>().unwrap();
         }

@@ -8,8 +8,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::config::Role;
 use super::graph::Graph;
-use super::role::Role as Input;
-use super::stage::{Params, StageKind};
+use super::stage::{EvalInputs, Inputs, Params, StageKind};
 use super::{Method, Pipeline};
 use crate::env::EnvId;
 use crate::error::{Error, Result};
@@ -40,7 +39,7 @@ impl Look {
             seed: m.seed,
             method: p.method,
             iteration: p.iteration,
-            policy: m.inputs.get(&Input::Policy.name())?.clone(),
+            policy: m.inputs.get(&super::role::Role::Policy.name())?.clone(),
             study: p.pipeline,
             mark: m.test_set.clone(),
         })
@@ -101,7 +100,7 @@ pub fn check(p: &Pipeline, g: &Graph, looks: &Looks, stored: &dyn Fn(&str) -> bo
     // (env, seed) -> the policies this run evaluates there, and whether it computes any.
     let mut mine: BTreeMap<(EnvId, u64), (BTreeSet<&str>, bool)> = BTreeMap::new();
     for n in &g.nodes {
-        let (Params::Eval(e), Some((_, policy))) = (&n.params, n.inputs.iter().find(|(role, _)| *role == Input::Policy)) else { continue };
+        let (Params::Eval(e), Inputs::Eval(EvalInputs { policy, .. })) = (&n.params, &n.inputs) else { continue };
         let at = mine.entry((e.env, n.seed)).or_default();
         at.0.insert(keys[policy].as_str());
         at.1 |= !stored(&keys[&n.name]);

@@ -19,6 +19,10 @@ pub(crate) trait Backend: std::fmt::Debug + Send + Sync {
     fn url(&self) -> Option<&str>;
     /// Before checking many artifacts: one listing instead of a request each.
     fn index(&self) -> Result<()>;
+    /// Requests retried so far (each is logged as it happens).
+    fn retried(&self) -> u64 {
+        0
+    }
     /// The manifest of `key` if it is published and intact.
     fn lookup(&self, store: &Store, key: &str) -> Result<Option<Manifest>>;
     /// Checks an artifact against its manifest; the error says what is wrong.

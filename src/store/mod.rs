@@ -25,6 +25,7 @@
 //! [`backend::Backend`]: the local directory and the bucket are its two implementations.
 mod backend;
 mod remote;
+pub mod retry;
 pub mod s3;
 
 use std::fs::File;
@@ -125,6 +126,12 @@ impl Store {
     /// The store's directory or URL, for messages.
     pub fn location(&self) -> String {
         self.backend.location(self)
+    }
+
+    /// Requests to the store retried by this process so far (an S3 store's; each is
+    /// logged when it happens).
+    pub fn retried(&self) -> u64 {
+        self.backend.retried()
     }
 
     /// Before checking many artifacts of an S3 store: one listing of its blobs instead of a

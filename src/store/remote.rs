@@ -22,6 +22,10 @@ impl Backend for Remote {
         self.index_blobs()
     }
 
+    fn retried(&self) -> u64 {
+        self.retries.count()
+    }
+
     fn lookup(&self, _: &Store, key: &str) -> Result<Option<Manifest>> {
         Ok(match Remote::check(self, key)? {
             Some(Ok(m)) => Some(m),

@@ -30,6 +30,7 @@ use object_store::{ObjectStore, ObjectStoreExt, PutMode, PutPayload};
 use sha2::{Digest, Sha256};
 
 use super::manifest::hex;
+use super::retry::clean;
 use super::{MANIFEST, Manifest};
 use crate::error::{Error, Result};
 
@@ -44,6 +45,8 @@ pub struct Remote {
     /// Blob sizes from one listing, when a command checks many artifacts
     /// ([`Remote::index_blobs`]); a blob it lacks is still asked about directly.
     blob_index: std::sync::Mutex<Option<std::collections::HashMap<String, u64>>>,
+    /// Whether the server has answered yet, and how many requests were retried.
+    pub(super) retries: super::retry::Retries,
 }
 
 impl std::fmt::Debug for Remote {
@@ -73,16 +76,14 @@ impl Remote {
         if std::env::var_os("AWS_REGION").is_none() && std::env::var_os("AWS_DEFAULT_REGION").is_none() {
             builder = builder.with_region("us-east-1");
         }
-        // Fail within seconds when the endpoint is unreachable instead of retrying for minutes.
-        let retry = object_store::RetryConfig {
-            max_retries: 3,
-            retry_timeout: Duration::from_secs(20),
-            backoff: object_store::BackoffConfig::default(),
-        };
+        // Retries are idrex's own ([`super::retry`]): every one is logged, and a store that
+        // has never answered is given up on within a second.
+        let retry =
+            object_store::RetryConfig { max_retries: 0, retry_timeout: Duration::ZERO, backoff: object_store::BackoffConfig::default() };
         let options = object_store::ClientOptions::new()
             .with_allow_http(allow_http)
             .with_connect_timeout(Duration::from_secs(5))
-            .with_timeout(Duration::from_secs(300));
+            .with_timeout(super::retry::request_timeout()?);
         let store =
             builder.with_retry(retry).with_client_options(options).build().map_err(|e| Error::Invalid(format!("{url}: {}", clean(&e))))?;
         let rt = tokio::runtime::Builder::new_multi_thread()
@@ -98,6 +99,7 @@ impl Remote {
             prefix: prefix.trim_matches('/').to_string(),
             rt,
             blob_index: std::sync::Mutex::new(None),
+            retries: super::retry::Retries::default(),
         })
     }
 
@@ -120,60 +122,84 @@ impl Remote {
         Error::Invalid(format!("{} {what}: {hint}", self.url))
     }
 
-    fn block<F: std::future::Future>(&self, f: F) -> F::Output {
-        self.rt.block_on(f)
+    /// Runs one request, retried with backoff while it fails in a way that may pass
+    /// ([`super::retry`]); every request is idempotent (a create that is retried after its
+    /// answer was lost finds its own object, which is the same bytes).
+    fn call<T, F, Fut>(&self, what: &str, op: F) -> std::result::Result<T, object_store::Error>
+    where
+        F: Fn() -> Fut,
+        Fut: std::future::Future<Output = std::result::Result<T, object_store::Error>>,
+    {
+        self.retries.run(&self.url, what, || self.rt.block_on(op()))
     }
 
     pub fn get(&self, rel: &str) -> Result<Option<Vec<u8>>> {
         let p = self.path(rel);
-        self.block(async {
+        let what = format!("reading {rel}");
+        self.call(&what, || async {
             match self.store.get(&p).await {
                 Ok(r) => r.bytes().await.map(|b| Some(b.to_vec())),
                 Err(object_store::Error::NotFound { .. }) => Ok(None),
                 Err(e) => Err(e),
             }
         })
-        .map_err(|e| self.err(&format!("reading {rel}"), e))
+        .map_err(|e| self.err(&what, e))
     }
 
     /// The size of an object, or None when it does not exist.
     pub fn size(&self, rel: &str) -> Result<Option<u64>> {
         let p = self.path(rel);
-        match self.block(self.store.head(&p)) {
-            Ok(m) => Ok(Some(m.size)),
-            Err(object_store::Error::NotFound { .. }) => Ok(None),
-            Err(e) => Err(self.err(&format!("checking {rel}"), e)),
-        }
+        let what = format!("checking {rel}");
+        self.call(&what, || async {
+            match self.store.head(&p).await {
+                Ok(m) => Ok(Some(m.size)),
+                Err(object_store::Error::NotFound { .. }) => Ok(None),
+                Err(e) => Err(e),
+            }
+        })
+        .map_err(|e| self.err(&what, e))
     }
 
     pub fn put(&self, rel: &str, bytes: Vec<u8>) -> Result<()> {
         let p = self.path(rel);
-        self.block(self.store.put(&p, PutPayload::from(bytes))).map(|_| ()).map_err(|e| self.err(&format!("writing {rel}"), e))
+        let what = format!("writing {rel}");
+        let payload = PutPayload::from(bytes);
+        self.call(&what, || self.store.put(&p, payload.clone())).map(|_| ()).map_err(|e| self.err(&what, e))
     }
 
     /// Puts `bytes` only if nothing is at `rel` (S3 `If-None-Match: *`).
     pub fn create(&self, rel: &str, bytes: Vec<u8>) -> Result<Created> {
         let p = self.path(rel);
-        match self.block(self.store.put_opts(&p, PutPayload::from(bytes), PutMode::Create.into())) {
-            Ok(_) => Ok(Created::Yes),
-            Err(object_store::Error::AlreadyExists { .. } | object_store::Error::Precondition { .. }) => Ok(Created::AlreadyThere),
-            Err(e) => Err(self.err(&format!("creating {rel}"), e)),
-        }
+        let what = format!("creating {rel}");
+        let payload = PutPayload::from(bytes);
+        self.call(&what, || async {
+            match self.store.put_opts(&p, payload.clone(), PutMode::Create.into()).await {
+                Ok(_) => Ok(Created::Yes),
+                Err(object_store::Error::AlreadyExists { .. } | object_store::Error::Precondition { .. }) => Ok(Created::AlreadyThere),
+                Err(e) => Err(e),
+            }
+        })
+        .map_err(|e| self.err(&what, e))
     }
 
     pub fn delete(&self, rel: &str) -> Result<()> {
         let p = self.path(rel);
-        match self.block(self.store.delete(&p)) {
-            Ok(()) | Err(object_store::Error::NotFound { .. }) => Ok(()),
-            Err(e) => Err(self.err(&format!("deleting {rel}"), e)),
-        }
+        let what = format!("deleting {rel}");
+        self.call(&what, || async {
+            match self.store.delete(&p).await {
+                Ok(()) | Err(object_store::Error::NotFound { .. }) => Ok(()),
+                Err(e) => Err(e),
+            }
+        })
+        .map_err(|e| self.err(&what, e))
     }
 
     /// Every object under `rel/`: (path relative to `rel/`, size, last modified as unix seconds).
     pub fn list(&self, rel: &str) -> Result<Vec<(String, u64, i64)>> {
         let p = self.path(rel);
+        let what = format!("listing {rel}");
         let metas: Vec<object_store::ObjectMeta> =
-            self.block(self.store.list(Some(&p)).try_collect()).map_err(|e| self.err(&format!("listing {rel}"), e))?;
+            self.call(&what, || self.store.list(Some(&p)).try_collect()).map_err(|e| self.err(&what, e))?;
         let base = format!("{}/", p.as_ref());
         Ok(metas
             .into_iter()
@@ -359,25 +385,4 @@ fn output_problem(o: &super::OutputFile) -> Option<String> {
     } else {
         None
     }
-}
-
-/// An object_store error's text without the request details it sometimes carries (which can
-/// include signed URLs), on one line.
-fn clean(e: &(dyn std::error::Error + 'static)) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        let t = s.to_string();
-        if !text.contains(&t) {
-            text = format!("{text}: {t}");
-        }
-        source = s.source();
-    }
-    let text = text.replace('\n', " ");
-    // Signed query strings never belong in output.
-    let text = match text.find("X-Amz-") {
-        Some(i) => format!("{}…", &text[..i]),
-        None => text,
-    };
-    text.chars().take(300).collect()
 }

@@ -4,12 +4,11 @@
 //! [`interpolation`] (variant 1), [`action_noise`] (variant 2) and [`multi_bc`] (variant 3).
 //! Their rollout stages are in [`crate::pipeline::stage::idrex`]; this module expands the
 //! iterations into the DAG.
-use super::{Graph, io, rl_runs, trex_params};
+use super::{Graph, rl_runs, trex_params};
 use crate::pipeline::Pipeline;
 use crate::pipeline::config::{CloneFilter, CloneSource, Method};
-use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::idrex::{action_noise, interpolation, multi_bc};
-use crate::pipeline::stage::{Params, trex::RankedSet};
+use crate::pipeline::stage::{ActionNoiseInputs, Inputs, InterpolationInputs, MultiBcInputs, Params, TrexInputs, trex::RankedSet};
 
 /// The three ways iD-REX makes a new ranked set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,55 +60,62 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
     let mut prev_reward = drex.trex.to_string();
     for k in 1..s.iterations {
         let prefix = format!("{}/k{k}", m.name());
-        let mut inputs: Vec<(Role, String)> = current.iter().enumerate().map(|(r, n)| io(Series::Policy.at(r), n)).collect();
-        let params = match variant {
-            Variant::Interpolation => {
-                inputs.extend(previous.iter().enumerate().map(|(r, n)| io(Series::Older.at(r), n)));
+        let (params, inputs) = match variant {
+            Variant::Interpolation => (
                 Params::InterpolationRollouts(interpolation::Params {
                     env,
                     alphas: s.idrex.alphas.clone(),
                     rollouts_per_level: s.idrex.rollouts_per_level,
-                })
-            }
-            Variant::ActionNoise => Params::ActionNoiseRollouts(action_noise::Params {
-                env,
-                sigmas: s.idrex.sigmas.clone(),
-                noise: s.idrex.action_noise,
-                rollouts_per_level: s.idrex.rollouts_per_level,
-            }),
+                }),
+                Inputs::InterpolationRollouts(InterpolationInputs { policies: current.clone(), older: previous.clone() }),
+            ),
+            Variant::ActionNoise => (
+                Params::ActionNoiseRollouts(action_noise::Params {
+                    env,
+                    sigmas: s.idrex.sigmas.clone(),
+                    noise: s.idrex.action_noise,
+                    rollouts_per_level: s.idrex.rollouts_per_level,
+                }),
+                Inputs::ActionNoiseRollouts(ActionNoiseInputs { policies: current.clone() }),
+            ),
             Variant::MultiBc => {
                 let filter = s.idrex.multi_bc_filter;
-                // Every earlier set, newest last: the filter compares with the newest that
-                // kept rollouts.
-                inputs.extend(sets.iter().enumerate().map(|(i, (n, _))| io(Series::Baseline.at(i), n)));
-                // The previous reward and the demonstrations always: the stage records what the
-                // previous-reward filter would decide, whichever filter runs.
-                inputs.push(io(Role::Reward, &prev_reward));
-                inputs.push(io(Role::Demos, drex.demos));
-                if filter == CloneFilter::HeldOutReward {
+                let judge = (filter == CloneFilter::HeldOutReward).then(|| {
                     let reward = g.get(&prev_reward).expect("the previous reward is in the graph").clone();
                     // An offset, not a hash: replicate r's seeds stay the replicate's shift of
                     // replicate 0's ([`crate::pipeline::config::replicate_seed`]).
                     let seed = reward.seed.wrapping_add(JUDGE_SEED_OFFSET + k as u64);
-                    inputs.push(io(Role::Judge, &g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)));
-                }
-                if s.idrex.multi_bc.source == CloneSource::Checkpoint {
-                    inputs.extend(current.iter().enumerate().map(|(r, n)| io(Series::Eval.at(r), &eval_of(n))));
-                }
-                Params::MultiBcRollouts(multi_bc::Params {
+                    g.push(format!("{prefix}/judge"), reward.params, seed, reward.inputs)
+                });
+                let inputs = MultiBcInputs {
+                    demos: drex.demos.to_string(),
+                    // The previous reward always: the stage records what the previous-reward
+                    // filter would decide, whichever filter runs.
+                    reward: prev_reward.clone(),
+                    judge,
+                    policies: current.clone(),
+                    // Every earlier set, newest last: the filter compares with the newest
+                    // that kept rollouts.
+                    baselines: sets.iter().map(|(n, _)| n.clone()).collect(),
+                    evals: match s.idrex.multi_bc.source {
+                        CloneSource::Checkpoint => current.iter().map(|n| eval_of(n)).collect(),
+                        CloneSource::Final => Vec::new(),
+                    },
+                };
+                let params = Params::MultiBcRollouts(multi_bc::Params {
                     env,
                     clone: s.idrex.multi_bc.clone(),
                     filter,
                     schedule: s.idrex.multi_bc_schedule.clone(),
                     rollouts_per_level: s.idrex.multi_bc_rollouts_per_level,
                     device: p.device,
-                })
+                });
+                (params, Inputs::MultiBcRollouts(inputs))
             }
         };
         let rollouts = g.push(format!("{prefix}/rollouts"), params, s.seeds[0], inputs);
         sets.push((rollouts, RankedSet { level: k, same_group: variant == Variant::MultiBc }));
-        let mut trex_inputs: Vec<(Role, String)> = sets.iter().enumerate().map(|(i, (n, _))| io(Series::Set.at(i), n)).collect();
-        trex_inputs.push(io(Role::Demos, drex.demos));
+        let trex_inputs = Inputs::Trex(TrexInputs { demos: drex.demos.to_string(), sets: sets.iter().map(|(n, _)| n.clone()).collect() });
         let ranked: Vec<RankedSet> = sets.iter().map(|(_, r)| *r).collect();
         let trex = g.push(format!("{prefix}/trex"), trex_params(p, m, ranked, variant == Variant::Interpolation), s.seeds[0], trex_inputs);
         previous = current;
@@ -155,8 +161,8 @@ mod tests {
         let r = roles(&g, "idrex-multi-bc/k1/rollouts");
         assert!(r.contains(&"reward".to_string()) && r.contains(&"eval1".to_string()) && !r.contains(&"judge".to_string()), "{r:?}");
         assert!(g.get("idrex-multi-bc/k1/judge").is_none());
-        let inputs = &g.get("idrex-multi-bc/k1/rollouts").unwrap().inputs;
-        assert!(inputs.contains(&(Series::Eval.at(0), "drex/eval/0".to_string())), "{inputs:?}");
+        let Inputs::MultiBcRollouts(inputs) = &g.get("idrex-multi-bc/k1/rollouts").unwrap().inputs else { panic!("multi-BC's inputs") };
+        assert_eq!(inputs.evals, ["drex/eval/0", "drex/eval/1"], "{inputs:?}");
 
         let g = graph("idrex:\n  multi_bc_filter: none\n");
         let r = roles(&g, "idrex-multi-bc/k1/rollouts");

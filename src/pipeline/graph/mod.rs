@@ -14,8 +14,8 @@ use std::collections::BTreeMap;
 
 use super::Pipeline;
 use super::config::Method;
-use super::role::{Role, Series};
-use super::stage::{Params, StageKind, bc, demos, eval, noise, ppo, trex};
+use super::stage::{BcInputs, DemosInputs, EvalInputs, Inputs, NoInputs, NoiseInputs, Params, PpoInputs, StageKind, TrexInputs};
+use super::stage::{bc, demos, eval, noise, ppo, trex};
 use crate::store;
 use idrex::{DrexNodes, Variant};
 
@@ -25,8 +25,8 @@ pub struct Node {
     pub name: String,
     pub params: Params,
     pub seed: u64,
-    /// (role, node name); roles are unique within a node.
-    pub inputs: Vec<(Role, String)>,
+    /// The nodes it reads, by their names, typed by its kind.
+    pub inputs: Inputs<String>,
 }
 
 impl Node {
@@ -45,9 +45,10 @@ impl Graph {
         self.nodes.iter().find(|n| n.name == name)
     }
 
-    pub fn push(&mut self, name: impl Into<String>, params: Params, seed: u64, inputs: Vec<(Role, String)>) -> String {
+    pub fn push(&mut self, name: impl Into<String>, params: Params, seed: u64, inputs: Inputs<String>) -> String {
         let name = name.into();
         debug_assert!(inputs.iter().all(|(_, i)| self.get(i).is_some()), "inputs come first");
+        debug_assert_eq!(params.kind(), inputs.kind(), "{name}: parameters and inputs of one kind");
         self.nodes.push(Node { name: name.clone(), params, seed, inputs });
         name
     }
@@ -72,7 +73,8 @@ impl Graph {
             .nodes
             .iter()
             .filter_map(|n| {
-                let inputs = n.inputs.iter().map(|(role, src)| Some((*role, strip(src)?))).collect::<Option<_>>()?;
+                let inputs =
+                    n.inputs.iter().all(|(_, src)| strip(src).is_some()).then(|| n.inputs.map(|src| strip(src).unwrap_or_default()))?;
                 Some(Node { name: strip(&n.name)?, params: n.params.clone(), seed: n.seed, inputs })
             })
             .collect();
@@ -89,10 +91,6 @@ impl Graph {
         }
         out
     }
-}
-
-pub(super) fn io(role: Role, src: &str) -> (Role, String) {
-    (role, src.to_string())
 }
 
 /// A T-REX node's parameters for `m` on the given ranked sets.
@@ -119,24 +117,23 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
         .iter()
         .enumerate()
         .map(|(r, &seed)| {
-            let mut inputs = vec![io(Role::Reward, reward)];
-            if p.composition.needs_ranked_set() {
-                // D-REX's ranked set, the reward's first: where the ranked floor and the
-                // ceiling are measured.
-                let set0 = g.get(reward).and_then(|n| n.inputs.iter().find(|(role, _)| *role == Series::Set.at(0))).map(|(_, n)| n.clone());
-                inputs.push(io(Role::Floor, &set0.expect("a T-REX node trains on set0")));
-            }
+            // D-REX's ranked set, the reward's first: where the ranked floor and the ceiling
+            // are measured, for a composition that needs them.
+            let floor = p.composition.needs_ranked_set().then(|| match g.get(reward).map(|n| &n.inputs) {
+                Some(Inputs::Trex(t)) => t.sets[0].clone(),
+                _ => unreachable!("a PPO run's reward is a T-REX node"),
+            });
             let run = g.push(
                 format!("{prefix}/ppo/{r}"),
                 Params::Ppo(ppo::PpoParams { env: p.env, ppo: p.ppo_for(m), reward: p.composition, device: p.device }),
                 seed,
-                inputs,
+                Inputs::Ppo(PpoInputs { reward: reward.to_string(), floor }),
             );
             g.push(
                 format!("{prefix}/eval/{r}"),
                 eval_params(p, m, iteration, r),
                 seed,
-                vec![io(Role::Policy, &run), io(Role::Reward, reward), io(Role::Demos, demos)],
+                Inputs::Eval(EvalInputs { policy: run.clone(), demos: demos.to_string(), reward: Some(reward.to_string()) }),
             );
             run
         })
@@ -164,7 +161,7 @@ pub fn expand(p: &Pipeline) -> crate::Result<Graph> {
             }
             let named = |n: &str| format!("{prefix}{n}");
             for n in sub.nodes {
-                let inputs = n.inputs.iter().map(|(role, src)| (role.clone(), named(src))).collect();
+                let inputs = n.inputs.map(|src| named(src));
                 g.push(named(&n.name), n.params, n.seed, inputs);
             }
         }
@@ -183,7 +180,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
         Some(from) => {
             let path = p.base_dir().join(from);
             let (sha256, _) = store::sha256_file(&path)?;
-            g.push("demos", Params::DemosImport(demos::ImportParams { env, path, sha256 }), seed0, vec![])
+            g.push("demos", Params::DemosImport(demos::ImportParams { env, path, sha256 }), seed0, Inputs::DemosImport(NoInputs::default()))
         }
         None => {
             let mut ppo = s.ppo.clone();
@@ -193,14 +190,21 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
                 "demonstrator",
                 Params::Demonstrator(demos::DemonstratorParams { env, ppo, target_return: s.demonstrator.target_return }),
                 seed0,
-                vec![],
+                Inputs::Demonstrator(NoInputs::default()),
             );
-            g.push("demos", Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }), seed0, vec![io(Role::Policy, &d)])
+            g.push(
+                "demos",
+                Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }),
+                seed0,
+                Inputs::Demos(DemosInputs { policy: d }),
+            )
         }
     };
-    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone(), device: p.device }), seed0, vec![io(Role::Demos, &demos)]);
+    let bc_of = |demos: &str| Inputs::Bc(BcInputs { demos: demos.to_string() });
+    let bc = g.push("bc", Params::Bc(bc::BcParams { env, bc: s.bc.clone(), device: p.device }), seed0, bc_of(&demos));
     if wants(Method::Bc) {
-        g.push("bc/eval", eval_params(p, Method::Bc, 0, 0), seed0, vec![io(Role::Policy, &bc), io(Role::Demos, &demos)]);
+        let inputs = Inputs::Eval(EvalInputs { policy: bc.clone(), demos: demos.clone(), reward: None });
+        g.push("bc/eval", eval_params(p, Method::Bc, 0, 0), seed0, inputs);
     }
     let variants: Vec<Variant> = Variant::ALL.into_iter().filter(|v| wants(v.method())).collect();
     if !wants(Method::Drex) && variants.is_empty() {
@@ -209,7 +213,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
     // D-REX's own BC where the file gives one that differs from the baseline's.
     let source = match &s.noise.bc {
         Some(cfg) if *cfg != s.bc => {
-            g.push("drex/bc", Params::Bc(bc::BcParams { env, bc: cfg.clone(), device: p.device }), seed0, vec![io(Role::Demos, &demos)])
+            g.push("drex/bc", Params::Bc(bc::BcParams { env, bc: cfg.clone(), device: p.device }), seed0, bc_of(&demos))
         }
         _ => bc.clone(),
     };
@@ -221,13 +225,13 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             rollouts_per_level: s.noise.rollouts_per_level,
         }),
         seed0,
-        vec![io(Role::Policy, &source)],
+        Inputs::NoiseRollouts(NoiseInputs { policy: source.clone() }),
     );
     let drex_trex = g.push(
         "drex/trex",
         trex_params(p, Method::Drex, vec![trex::RankedSet { level: 0, same_group: false }], false),
         seed0,
-        vec![io(Series::Set.at(0), &noise), io(Role::Demos, &demos)],
+        Inputs::Trex(TrexInputs { demos: demos.clone(), sets: vec![noise.clone()] }),
     );
     let drex_ppo = rl_runs(&mut g, p, Method::Drex, "drex", 1, &drex_trex, &demos);
     let drex = DrexNodes { demos: &demos, bc: &source, noise: &noise, trex: &drex_trex, ppo: &drex_ppo };
@@ -250,7 +254,7 @@ pub enum PlanFormat {
 /// A node's inputs, each source node once (in first-role order) with how many roles read it.
 fn distinct_inputs(n: &Node) -> Vec<(&str, usize)> {
     let mut out: Vec<(&str, usize)> = Vec::new();
-    for (_, src) in &n.inputs {
+    for (_, src) in n.inputs.iter() {
         match out.iter_mut().find(|(s, _)| *s == src.as_str()) {
             Some((_, c)) => *c += 1,
             None => out.push((src.as_str(), 1)),
@@ -270,7 +274,7 @@ pub fn render(g: &Graph, keys: &BTreeMap<String, String>, stored: &dyn Fn(&str) 
                 let k = &keys[&n.name];
                 let style = if stored(k) { ", style=filled, fillcolor=palegreen" } else { "" };
                 out.push_str(&format!("  {} [label=\"{}\\n{}\\n{}\"{style}];\n", id(&n.name), n.name, n.kind().name(), &k[..12]));
-                for (_, src) in &n.inputs {
+                for (_, src) in n.inputs.iter() {
                     out.push_str(&format!("  {} -> {};\n", id(src), id(&n.name)));
                 }
             }
@@ -355,11 +359,14 @@ mod tests {
             let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}{extra}")).unwrap();
             expand(&p).unwrap().get("drex/ppo/0").unwrap().inputs.clone()
         };
-        let floor = (Role::Floor, "drex/noise".to_string());
+        let floor = |i: Inputs<String>| match i {
+            Inputs::Ppo(p) => p.floor,
+            other => panic!("{other:?}"),
+        };
         for extra in ["", "reward:\n  ceiling: none\n", "reward:\n  level: running\n"] {
-            assert!(ppo_inputs(extra).contains(&floor), "{extra}");
+            assert_eq!(floor(ppo_inputs(extra)).as_deref(), Some("drex/noise"), "{extra}");
         }
-        assert!(!ppo_inputs("reward:\n  level: running\n  ceiling: none\n").contains(&floor));
+        assert_eq!(floor(ppo_inputs("reward:\n  level: running\n  ceiling: none\n")), None);
     }
 
     /// Training the rewards in bf16 changes every T-REX stage and what follows it (BC and the
@@ -440,8 +447,8 @@ mod tests {
         }
         assert_eq!(g.subgraph("Walker2d-v5/").nodes, walker.nodes);
         let ppo = g.get("Walker2d-v5/drex/ppo/0").unwrap();
-        let reward = |role: Role, node: &str| (role, format!("Walker2d-v5/drex/{node}"));
-        assert_eq!(ppo.inputs, vec![reward(Role::Reward, "trex"), reward(Role::Floor, "noise")]);
+        let drex = |node: &str| format!("Walker2d-v5/drex/{node}");
+        assert_eq!(ppo.inputs, Inputs::Ppo(PpoInputs { reward: drex("trex"), floor: Some(drex("noise")) }));
         // Each environment keeps its own defaults (the control-cost weight differs).
         assert_ne!(study.for_env(crate::env::EnvId::HalfCheetah).composition, study.composition);
 
@@ -522,7 +529,7 @@ mod tests {
                 assert_ne!(&kt[name], key, "{name}: teeth, the baseline's BC would change it");
             }
         }
-        assert_eq!(split.get("drex/noise").unwrap().inputs, vec![(Role::Policy, "drex/bc".to_string())]);
+        assert_eq!(split.get("drex/noise").unwrap().inputs, Inputs::NoiseRollouts(NoiseInputs { policy: "drex/bc".to_string() }));
         // The same settings twice: one BC stage.
         let same = parse(plain, Some(plain));
         assert!(same.get("drex/bc").is_none());

@@ -1,10 +1,11 @@
 //! `bc`: behavioural cloning of the demonstrations ([`crate::algo::bc`]).
+use std::path::PathBuf;
+
 use super::{POLICY, StageCtx, read_rollouts};
 use crate::algo::bc::{self, BcConfig, BcReport};
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::Device;
-use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -16,8 +17,13 @@ pub struct BcParams {
     pub device: Device,
 }
 
-pub fn run(p: &BcParams, ctx: &StageCtx) -> Result<BcReport> {
-    let trajs = read_rollouts(ctx.input(Role::Demos)?)?;
+crate::stage_inputs! {
+    /// BC reads the demonstrations.
+    BcInputs { demos: One Demos }
+}
+
+pub fn run(p: &BcParams, inputs: &BcInputs<PathBuf>, ctx: &StageCtx) -> Result<BcReport> {
+    let trajs = read_rollouts(&inputs.demos)?;
     ctx.progress.set_message("behavioural cloning");
     let (mut policy, report) = bc::train(&trajs, &p.bc, ctx.seed, ctx.threads, p.device)?;
     policy.env = Some(p.env.name().to_string());

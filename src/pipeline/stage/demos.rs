@@ -9,7 +9,7 @@ use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::log::mcap;
-use crate::pipeline::role::Role;
+use crate::pipeline::inputs::NoInputs;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
 
@@ -31,7 +31,7 @@ pub struct DemonstratorMetrics {
     pub final_eval: Option<f64>,
 }
 
-pub fn demonstrator(p: &DemonstratorParams, ctx: &StageCtx) -> Result<DemonstratorMetrics> {
+pub fn demonstrator(p: &DemonstratorParams, _: &NoInputs<PathBuf>, ctx: &StageCtx) -> Result<DemonstratorMetrics> {
     let cfg = p.ppo.clone();
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut reached = None;
@@ -63,10 +63,16 @@ pub struct DemosParams {
     pub episodes: usize,
 }
 
+crate::stage_inputs! {
+    /// The demonstrations are rolled out from the demonstrator's policy.
+    DemosInputs { policy: One Policy }
+}
+
 /// Rollouts of the demonstrator's stochastic policy, episode k from `derive(seed, Episode, k)`.
-pub fn demos(p: &DemosParams, ctx: &StageCtx) -> Result<RolloutSummary> {
+
+pub fn demos(p: &DemosParams, inputs: &DemosInputs<PathBuf>, ctx: &StageCtx) -> Result<RolloutSummary> {
     let mut env = Env::new(p.env)?;
-    let policy = load_policy_for(ctx.input(Role::Policy)?, &env, p.env)?;
+    let policy = load_policy_for(&inputs.policy, &env, p.env)?;
     let meta = TrajMeta { source: "demonstrator".into(), ..Default::default() };
     let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes, ctx.seed, Purpose::Episode, &meta);
     ctx.write_rollouts(p.env, &trajs, None)?;
@@ -82,7 +88,7 @@ pub struct ImportParams {
     pub sha256: String,
 }
 
-pub fn import(p: &ImportParams, ctx: &StageCtx) -> Result<RolloutSummary> {
+pub fn import(p: &ImportParams, _: &NoInputs<PathBuf>, ctx: &StageCtx) -> Result<RolloutSummary> {
     let trajs = load(&p.path, p.env)?;
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(RolloutSummary::of(&trajs))

@@ -4,6 +4,8 @@
 //! learned reward says of each checkpoint's episodes: the ensemble's mean predicted return,
 //! its most pessimistic member and the members' disagreement (the ground-truth-free
 //! checkpoint choice reads these), and for the final policy how well it ranks the episodes.
+use std::path::PathBuf;
+
 use super::{REWARD, RolloutSummary, StageCtx, load_policy_for, read_rollouts};
 use crate::algo::ppo;
 use crate::algo::scoring::{CheckpointEval, learned_score, member_stats};
@@ -12,7 +14,6 @@ use crate::env::{Env, EnvId};
 use crate::error::Result;
 use crate::nn::{ActorCritic, RewardEnsemble};
 use crate::pipeline::config::Method;
-use crate::pipeline::role::Role;
 use crate::rollout::{self, PolicyActor};
 use crate::seed::Purpose;
 use crate::stats::{nan_as_null, pairwise_accuracy, pearson, spearman};
@@ -70,14 +71,20 @@ pub struct EvalMetrics {
     pub checkpoints: Vec<CheckpointEval>,
 }
 
-pub fn run(p: &EvalParams, ctx: &StageCtx) -> Result<EvalMetrics> {
+crate::stage_inputs! {
+    /// An evaluation rolls out a PPO run's (or BC's) policy; with the reward it trained on,
+    /// it also scores the episodes by it, in units measured on the demonstrations.
+    EvalInputs { policy: One Policy, reward: Maybe Reward, demos: One Demos }
+}
+
+pub fn run(p: &EvalParams, inputs: &EvalInputs<PathBuf>, ctx: &StageCtx) -> Result<EvalMetrics> {
     let mut env = Env::new(p.env)?;
-    let policy_dir = ctx.input(Role::Policy)?;
-    let reward = match ctx.inputs.get(&Role::Reward) {
+    let policy_dir = inputs.policy.as_path();
+    let reward = match &inputs.reward {
         None => None,
         Some(dir) => {
             let model = RewardEnsemble::load(&dir.join(REWARD))?;
-            let reference = member_stats(&model, &read_rollouts(ctx.input(Role::Demos)?)?);
+            let reference = member_stats(&model, &read_rollouts(&inputs.demos)?);
             Some((model, reference))
         }
     };

@@ -7,7 +7,9 @@
 //! canonical JSON goes into the node's key, and its metrics are stored in the manifest as
 //! JSON and read back through the same [`Metrics`] structs by plots and the report.
 //!
-//! The versions are [`StageKind::version`]'s (a test compares them).
+//! The versions are [`StageKind::version`]'s (a test compares them). Each kind's inputs are
+//! a struct declared beside its body (`PpoInputs`, ...; [`Inputs`] is their union), which
+//! the graph fills and the runner resolves; the table's names are their recorded roles.
 //!
 //! | kind | version | inputs | outputs | file |
 //! |---|---|---|---|---|
@@ -17,11 +19,11 @@
 //! | bc | 3 | demos | policy/ | bc.rs |
 //! | noise-rollouts | 1 | policy | rollouts.mcap | noise.rs |
 //! | trex | 3 | set0..setN, demos | reward/ | trex.rs |
-//! | ppo | 3 | reward | policy/, curve.csv | ppo.rs |
+//! | ppo | 3 | reward, floor? | policy/, curve.csv | ppo.rs |
 //! | eval | 2 | policy, reward?, demos | rollouts.mcap | eval.rs |
 //! | interpolation-rollouts | 1 | policy<r>, older<r> | rollouts.mcap | idrex/interpolation.rs |
 //! | action-noise-rollouts | 1 | policy<r> | rollouts.mcap | idrex/action_noise.rs |
-//! | multi-bc-rollouts | 4 | policy<r>, baseline<i>, reward or judge, demos, eval<r> | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
+//! | multi-bc-rollouts | 4 | policy<r>, baseline<i>, reward, judge?, demos, eval<r> | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
 pub mod bc;
 pub mod demos;
 pub mod eval;
@@ -38,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 pub use super::kind::StageKind;
-use super::role::{Role, Series};
+use super::role::Role;
 
 use crate::data::Trajectory;
 use crate::env::{Env, EnvId};
@@ -55,7 +57,7 @@ pub const REWARD: &str = "reward";
 /// that adding a kind is one line here, one in [`StageKind`], plus its file (the matches
 /// over `StageKind` are exhaustive: a kind missing here does not compile).
 macro_rules! stage_kinds {
-    ($($kind:ident: $params:ty => $metrics:ty, $body:path;)*) => {
+    ($($kind:ident: $params:ty => $metrics:ty, $inputs:ident, $body:path;)*) => {
         /// A node's parameters, typed per stage kind.
         #[derive(Debug, Clone, PartialEq)]
         pub enum Params {
@@ -93,27 +95,99 @@ macro_rules! stage_kinds {
             }
         }
 
-        /// Runs a stage body. Its outputs depend only on its parameters, seed and inputs:
-        /// `ctx.threads` is a budget for work whose result does not depend on it.
+        /// A node's inputs, typed per stage kind (each kind's struct is declared beside its
+        /// body with [`crate::stage_inputs!`]): `T` is a node's name in the graph, and an
+        /// artifact directory when the stage runs.
+        #[derive(Debug, Clone, PartialEq)]
+        pub enum Inputs<T> {
+            $($kind($inputs<T>),)*
+        }
+
+        impl<T> Inputs<T> {
+            pub fn kind(&self) -> StageKind {
+                match self { $(Inputs::$kind(_) => StageKind::$kind,)* }
+            }
+
+            /// (role, input): the roles are the names keys and manifests record.
+            pub fn roles(&self) -> Vec<(Role, &T)> {
+                match self { $(Inputs::$kind(i) => i.roles(),)* }
+            }
+
+            /// A `kind`'s inputs from their recorded roles (`node` names it in messages): a
+            /// missing, repeated or unknown role is refused.
+            pub fn from_roles(kind: StageKind, node: &str, inputs: impl IntoIterator<Item = (Role, T)>) -> Result<Self> {
+                let mut named = Named::new(node, inputs)?;
+                let out = match kind { $(StageKind::$kind => Inputs::$kind(<$inputs<T> as StageInputs<T>>::take(&mut named)?),)* };
+                named.finish(kind.name())?;
+                Ok(out)
+            }
+        }
+
+        /// Runs a stage body on its own kind's inputs. Its outputs depend only on its
+        /// parameters, seed and inputs: `ctx.threads` is a budget for work whose result does
+        /// not depend on it.
         pub fn run(params: &Params, ctx: &StageCtx) -> Result<Metrics> {
             crate::nn::single_threaded();
-            match params { $(Params::$kind(p) => $body(p, ctx).map(Metrics::$kind),)* }
+            match (params, &ctx.inputs) {
+                $((Params::$kind(p), Inputs::$kind(i)) => $body(p, i, ctx).map(Metrics::$kind),)*
+                (p, i) => Err(Error::Invalid(format!("a {} stage was given a {} stage's inputs", p.kind().name(), i.kind().name()))),
+            }
         }
     };
 }
 
+pub use super::inputs::NoInputs;
+use super::inputs::{Named, StageInputs};
+pub use bc::BcInputs;
+pub use demos::DemosInputs;
+pub use eval::EvalInputs;
+pub use idrex::action_noise::ActionNoiseInputs;
+pub use idrex::interpolation::InterpolationInputs;
+pub use idrex::multi_bc::MultiBcInputs;
+pub use noise::NoiseInputs;
+pub use ppo::PpoInputs;
+pub use trex::TrexInputs;
+
 stage_kinds! {
-    Demonstrator: demos::DemonstratorParams => demos::DemonstratorMetrics, demos::demonstrator;
-    Demos: demos::DemosParams => RolloutSummary, demos::demos;
-    DemosImport: demos::ImportParams => RolloutSummary, demos::import;
-    Bc: bc::BcParams => crate::algo::bc::BcReport, bc::run;
-    NoiseRollouts: noise::NoiseParams => noise::NoiseMetrics, noise::run;
-    Trex: trex::TrexParams => trex::TrexMetrics, trex::run;
-    Ppo: ppo::PpoParams => ppo::PpoMetrics, ppo::run;
-    Eval: eval::EvalParams => eval::EvalMetrics, eval::run;
-    InterpolationRollouts: idrex::interpolation::Params => DegradationMetrics, idrex::interpolation::run;
-    ActionNoiseRollouts: idrex::action_noise::Params => DegradationMetrics, idrex::action_noise::run;
-    MultiBcRollouts: idrex::multi_bc::Params => idrex::multi_bc::Metrics, idrex::multi_bc::run;
+    Demonstrator: demos::DemonstratorParams => demos::DemonstratorMetrics, NoInputs, demos::demonstrator;
+    Demos: demos::DemosParams => RolloutSummary, DemosInputs, demos::demos;
+    DemosImport: demos::ImportParams => RolloutSummary, NoInputs, demos::import;
+    Bc: bc::BcParams => crate::algo::bc::BcReport, BcInputs, bc::run;
+    NoiseRollouts: noise::NoiseParams => noise::NoiseMetrics, NoiseInputs, noise::run;
+    Trex: trex::TrexParams => trex::TrexMetrics, TrexInputs, trex::run;
+    Ppo: ppo::PpoParams => ppo::PpoMetrics, PpoInputs, ppo::run;
+    Eval: eval::EvalParams => eval::EvalMetrics, EvalInputs, eval::run;
+    InterpolationRollouts: idrex::interpolation::Params => DegradationMetrics, InterpolationInputs, idrex::interpolation::run;
+    ActionNoiseRollouts: idrex::action_noise::Params => DegradationMetrics, ActionNoiseInputs, idrex::action_noise::run;
+    MultiBcRollouts: idrex::multi_bc::Params => idrex::multi_bc::Metrics, MultiBcInputs, idrex::multi_bc::run;
+}
+
+impl<T> Inputs<T> {
+    /// (role, input), as [`Inputs::roles`].
+    pub fn iter(&self) -> std::vec::IntoIter<(Role, &T)> {
+        self.roles().into_iter()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.roles().is_empty()
+    }
+
+    /// The same inputs, each through `f` (node names to keys or directories).
+    pub fn try_map<U>(&self, mut f: impl FnMut(&T) -> Result<U>) -> Result<Inputs<U>> {
+        let mapped = self.iter().map(|(role, t)| Ok((role, f(t)?))).collect::<Result<Vec<_>>>()?;
+        Inputs::from_roles(self.kind(), "", mapped)
+    }
+
+    pub fn map<U>(&self, mut f: impl FnMut(&T) -> U) -> Inputs<U> {
+        self.try_map(|t| Ok(f(t))).expect("the same roles make the same kind's inputs")
+    }
+
+    /// A `kind`'s inputs from the names a manifest or a Slurm definition records (`what`
+    /// names the node in messages).
+    pub fn from_recorded<'a>(kind: StageKind, what: &str, recorded: impl IntoIterator<Item = (&'a String, T)>) -> Result<Self> {
+        let named = recorded.into_iter().map(|(name, t)| Ok((Role::recorded(name, what)?, t))).collect::<Result<Vec<_>>>()?;
+        Inputs::from_roles(kind, what, named)
+    }
 }
 
 impl Params {
@@ -177,8 +251,8 @@ impl Typed {
 /// What a stage body gets besides its parameters.
 pub struct StageCtx<'a> {
     pub seed: u64,
-    /// Input role -> artifact directory.
-    pub inputs: BTreeMap<Role, PathBuf>,
+    /// The stage's inputs' artifact directories.
+    pub inputs: Inputs<PathBuf>,
     pub out: &'a Path,
     /// Threads the stage may use for work whose result does not depend on their number.
     pub threads: usize,
@@ -186,15 +260,6 @@ pub struct StageCtx<'a> {
 }
 
 impl StageCtx<'_> {
-    pub fn input(&self, role: Role) -> Result<&Path> {
-        self.inputs.get(&role).map(PathBuf::as_path).ok_or_else(|| Error::Invalid(format!("stage has no input '{role}'")))
-    }
-
-    /// The inputs of a series, `0, 1, ...` in order.
-    pub fn numbered(&self, series: Series) -> Vec<&Path> {
-        (0..).map_while(|i| self.inputs.get(&series.at(i)).map(PathBuf::as_path)).collect()
-    }
-
     pub fn write_rollouts(&self, env: EnvId, trajs: &[Trajectory], learned: Option<&[Vec<f64>]>) -> Result<()> {
         let dt = Env::new(env)?.dt();
         mcap::write(&self.out.join(ROLLOUTS), env.name(), dt, trajs, learned)

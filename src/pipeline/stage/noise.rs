@@ -1,11 +1,12 @@
 //! `noise-rollouts`: D-REX's automatically ranked data, epsilon-greedy rollouts of the BC
 //! policy at each level of the noise schedule (lower epsilon ranks higher).
+use std::path::PathBuf;
+
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
 use crate::algo::noise;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -22,9 +23,14 @@ pub struct NoiseMetrics {
     pub returns: RolloutSummary,
 }
 
-pub fn run(p: &NoiseParams, ctx: &StageCtx) -> Result<NoiseMetrics> {
+crate::stage_inputs! {
+    /// Noise is injected into the policy it rolls out (D-REX's: BC).
+    NoiseInputs { policy: One Policy }
+}
+
+pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Result<NoiseMetrics> {
     let mut env = Env::new(p.env)?;
-    let policy = load_policy_for(ctx.input(Role::Policy)?, &env, p.env)?;
+    let policy = load_policy_for(&inputs.policy, &env, p.env)?;
     ctx.progress.set_message("epsilon-greedy rollouts");
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
     let trajs = noise::epsilon_greedy(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta);

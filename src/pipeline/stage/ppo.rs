@@ -4,13 +4,14 @@
 //! evaluation stage evaluates one by one. With `reward.level: ranked-floor`, the reward's
 //! levels are fixed from the `floor` input (D-REX's ranked set) before training; with
 //! `reward.ceiling`, each member's cap is measured there too.
+use std::path::PathBuf;
+
 use super::{POLICY, REWARD, StageCtx, ppo_progress};
 use crate::algo::ppo::{self, PpoConfig};
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::reward::{Composition, RewardLevel};
 use crate::nn::{Device, RewardEnsemble};
-use crate::pipeline::role::Role;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -47,11 +48,17 @@ pub struct PpoMetrics {
 
 pub const CURVE: &str = "curve.csv";
 
-pub fn run(p: &PpoParams, ctx: &StageCtx) -> Result<PpoMetrics> {
+crate::stage_inputs! {
+    /// PPO trains on the learned reward; where the reward's composition measures a level or
+    /// a ceiling ([`Composition::needs_ranked_set`]), on D-REX's ranked set too.
+    PpoInputs { reward: One Reward, floor: Maybe Floor }
+}
+
+pub fn run(p: &PpoParams, inputs: &PpoInputs<PathBuf>, ctx: &StageCtx) -> Result<PpoMetrics> {
     let cfg = p.ppo.clone();
-    let mut reward = RewardEnsemble::load(&ctx.input(Role::Reward)?.join(REWARD))?;
-    if p.reward.needs_ranked_set() {
-        let set = super::read_rollouts(ctx.input(Role::Floor)?)?;
+    let mut reward = RewardEnsemble::load(&inputs.reward.join(REWARD))?;
+    if let Some(floor) = &inputs.floor {
+        let set = super::read_rollouts(floor)?;
         if p.reward.level == RewardLevel::RankedFloor {
             reward.fix_levels_from(&set)?;
         }

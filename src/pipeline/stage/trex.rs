@@ -3,13 +3,14 @@
 //! a set (and, where the set asks, within one source group: one clone, one source policy);
 //! with `cross_level`, every trajectory of a later iD-REX iteration ranks above every
 //! earlier one (the report's equation 8).
+use std::path::PathBuf;
+
 use super::{REWARD, StageCtx, read_rollouts};
 use crate::algo::trex::{self, ModelReport, Ranking, TrexConfig};
 use crate::data::Trajectory;
 use crate::env::EnvId;
 use crate::error::Result;
 use crate::nn::Device;
-use crate::pipeline::role::{Role, Series};
 use crate::stats::{nan_as_null, pearson, spearman};
 
 /// How one ranked input set takes part.
@@ -65,10 +66,16 @@ pub struct TrexMetrics {
     pub val_accuracy: f64,
 }
 
-pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
+crate::stage_inputs! {
+    /// T-REX learns from the ranked sets (`sets[i]` is described by `TrexParams::sets[i]`)
+    /// and scores the demonstrations.
+    TrexInputs { sets: Many Set, demos: One Demos }
+}
+
+pub fn run(p: &TrexParams, inputs: &TrexInputs<PathBuf>, ctx: &StageCtx) -> Result<TrexMetrics> {
     let mut trajs = Vec::new();
     let mut ranking = Ranking { same_group: true, cross_level: p.cross_level, ..Default::default() };
-    for (i, dir) in ctx.numbered(Series::Set).into_iter().enumerate() {
+    for (i, dir) in inputs.sets.iter().enumerate() {
         let set = p.sets.get(i).copied().unwrap_or(RankedSet { level: 0, same_group: false });
         let grouped = set.same_group || p.trex.same_group;
         for t in read_rollouts(dir)? {
@@ -86,7 +93,7 @@ pub fn run(p: &TrexParams, ctx: &StageCtx) -> Result<TrexMetrics> {
         truth: ts.iter().map(Trajectory::ret).collect(),
     };
     let train = score(&trajs);
-    let demos = score(&read_rollouts(ctx.input(Role::Demos)?)?);
+    let demos = score(&read_rollouts(&inputs.demos)?);
     Ok(TrexMetrics {
         val_accuracy: reports.iter().map(|r| r.val_accuracy).sum::<f64>() / reports.len() as f64,
         models: reports,

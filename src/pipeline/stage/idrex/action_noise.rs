@@ -5,7 +5,6 @@ use crate::algo::noise::NoiseProcess;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::pipeline::role::Series;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -19,11 +18,16 @@ pub struct Params {
     pub rollouts_per_level: usize,
 }
 
-pub fn run(p: &Params, ctx: &StageCtx) -> Result<DegradationMetrics> {
+crate::stage_inputs! {
+    /// The iteration's policies, one per RL run.
+    ActionNoiseInputs { policies: Many Policy }
+}
+
+pub fn run(p: &Params, inputs: &ActionNoiseInputs<std::path::PathBuf>, ctx: &StageCtx) -> Result<DegradationMetrics> {
     let mut env = Env::new(p.env)?;
     let ad = env.act_dim();
     let mut trajs = Vec::new();
-    for (r, dir) in ctx.numbered(Series::Policy).into_iter().enumerate() {
+    for (r, dir) in inputs.policies.iter().enumerate() {
         let policy = load_policy_for(dir, &env, p.env)?;
         let meta = TrajMeta { source: format!("action-noise/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::Source, r as u64);

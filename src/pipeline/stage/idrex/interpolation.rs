@@ -6,7 +6,6 @@ use crate::algo::noise::Interpolation;
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId};
 use crate::error::Result;
-use crate::pipeline::role::Series;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -19,11 +18,17 @@ pub struct Params {
     pub rollouts_per_level: usize,
 }
 
-pub fn run(p: &Params, ctx: &StageCtx) -> Result<DegradationMetrics> {
+crate::stage_inputs! {
+    /// The iteration's policies, each paired with the one before it (`older[r]`, BC's for
+    /// the first iteration).
+    InterpolationInputs { policies: Many Policy, older: Many Older }
+}
+
+pub fn run(p: &Params, inputs: &InterpolationInputs<std::path::PathBuf>, ctx: &StageCtx) -> Result<DegradationMetrics> {
     let mut env = Env::new(p.env)?;
     let noise: Vec<f64> = p.alphas.iter().map(|a| 1.0 - a).collect();
     let mut trajs = Vec::new();
-    for (r, (n, o)) in ctx.numbered(Series::Policy).into_iter().zip(ctx.numbered(Series::Older)).enumerate() {
+    for (r, (n, o)) in inputs.policies.iter().zip(&inputs.older).enumerate() {
         let (newer, older) = (load_policy_for(n, &env, p.env)?, load_policy_for(o, &env, p.env)?);
         let meta = TrajMeta { source: format!("interpolation/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::Source, r as u64);

@@ -19,7 +19,6 @@ use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::nn::{Device, RewardEnsemble};
 use crate::pipeline::config::{CloneConfig, CloneFilter, CloneSource};
-use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::{DegradationLevel, Metrics as AnyMetrics, REWARD, StageCtx, Typed, degradation, read_rollouts};
 use crate::seed::{self, Purpose};
 
@@ -65,10 +64,10 @@ fn least_noisy(ts: &[Trajectory]) -> Vec<Trajectory> {
 
 /// The checkpoint step the ground-truth-free protocol chooses from the source runs'
 /// evaluations (the report's rule: the highest pessimistic learned return, pooled over runs).
-pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
+pub fn chosen_step(evals: &[impl AsRef<Path>]) -> Result<usize> {
     let mut runs = Vec::new();
     for dir in evals {
-        let path = dir.join(crate::store::MANIFEST);
+        let path = dir.as_ref().join(crate::store::MANIFEST);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         let m: crate::store::Manifest = serde_json::from_str(&text).map_err(|e| Error::file(&path, e.to_string()))?;
         match Typed::of(&m)?.metrics {
@@ -82,22 +81,40 @@ pub fn chosen_step(evals: &[&Path]) -> Result<usize> {
         .ok_or_else(|| Error::Invalid("multi-BC's source is `checkpoint`, but the source runs have no learned checkpoint scores".into()))
 }
 
-pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
+crate::stage_inputs! {
+    /// Clones of the iteration's policies (`evals[r]`: each run's evaluation, where clones
+    /// start from its chosen checkpoint), filtered against the newest earlier ranked set that
+    /// kept rollouts (`baselines`), the previous reward (always read: the stage records what
+    /// its filter would decide) or the held-out `judge`, in units of the demonstrations.
+    MultiBcInputs {
+        policies: Many Policy,
+        baselines: Many Baseline,
+        reward: One Reward,
+        demos: One Demos,
+        judge: Maybe Judge,
+        evals: Many Eval,
+    }
+}
+
+pub fn run(p: &Params, inputs: &MultiBcInputs<std::path::PathBuf>, ctx: &StageCtx) -> Result<Metrics> {
     let mut env = Env::new(p.env)?;
     // Each reward with its units, measured once on the demonstrations.
-    let demos = read_rollouts(ctx.input(Role::Demos)?)?;
+    let demos = read_rollouts(&inputs.demos)?;
     let scaled = |r: RewardEnsemble| {
         let scale = demo_scale(&r, &demos);
         (r, scale)
     };
-    let previous = scaled(RewardEnsemble::load(&ctx.input(Role::Reward)?.join(REWARD))?);
+    let previous = scaled(RewardEnsemble::load(&inputs.reward.join(REWARD))?);
     let judge = match p.filter {
         CloneFilter::None | CloneFilter::PreviousReward => None,
-        CloneFilter::HeldOutReward => Some(scaled(RewardEnsemble::load(&ctx.input(Role::Judge)?.join(REWARD))?)),
+        CloneFilter::HeldOutReward => {
+            let judge = inputs.judge.as_ref().ok_or_else(|| Error::Invalid("the held-out filter needs the judge input".into()))?;
+            Some(scaled(RewardEnsemble::load(&judge.join(REWARD))?))
+        }
     };
     // The newest earlier set with rollouts (an earlier multi-BC set may have kept none).
     let mut baseline = None;
-    for (i, dir) in ctx.numbered(Series::Baseline).into_iter().enumerate() {
+    for (i, dir) in inputs.baselines.iter().enumerate() {
         let set = read_rollouts(dir)?;
         if !set.is_empty() {
             baseline = Some((i, least_noisy(&set)));
@@ -105,11 +122,11 @@ pub fn run(p: &Params, ctx: &StageCtx) -> Result<Metrics> {
     }
     let source_step = match p.clone.source {
         CloneSource::Final => None,
-        CloneSource::Checkpoint => Some(chosen_step(&ctx.numbered(Series::Eval))?),
+        CloneSource::Checkpoint => Some(chosen_step(&inputs.evals)?),
     };
     let random_return = clone::random_return(&mut env, p.clone.fidelity_episodes, ctx.seed);
     let (mut kept, mut extra, mut clones) = (Vec::new(), Vec::new(), Vec::new());
-    for (r, dir) in ctx.numbered(Series::Policy).into_iter().enumerate() {
+    for (r, dir) in inputs.policies.iter().enumerate() {
         ctx.progress.set_message(format!("clone {}", r + 1));
         let made = clone::make(&mut env, dir, source_step, &p.clone, p.env, ctx.seed, r, ctx.threads, p.device)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
