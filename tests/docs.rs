@@ -233,6 +233,58 @@ fn analysis_commits_each_figure_once_and_its_links_resolve() {
     assert!(checked >= 100, "{checked} links");
 }
 
+/// Every study in `analysis/results/` has one layout: `README.md`, its pipeline files
+/// (`*.yaml`) and `report/` (what idrex and the scripts wrote), nothing else at its top; its
+/// figures are SVG only; and no two of its pipeline files are copies that differ only in which
+/// replicates they run (one file with a range does that, run with `--only-replicate`).
+#[test]
+fn analysis_studies_share_one_layout() {
+    let results = repo("analysis/results");
+    let mut studies = 0;
+    for e in std::fs::read_dir(&results).unwrap().flatten() {
+        let study = e.path();
+        if !study.is_dir() {
+            assert_eq!(e.file_name(), "README.md", "{}: only study folders and the index belong here", study.display());
+            continue;
+        }
+        studies += 1;
+        assert!(study.join("README.md").is_file(), "{}: no README.md", study.display());
+        let mut pipelines = Vec::new();
+        for f in std::fs::read_dir(&study).unwrap().flatten() {
+            let (path, name) = (f.path(), f.file_name().to_string_lossy().into_owned());
+            if name.ends_with(".yaml") {
+                pipelines.push(std::fs::read_to_string(&path).unwrap());
+            } else {
+                assert!(name == "README.md" || (name == "report" && path.is_dir()), "{}: move it under report/", path.display());
+            }
+        }
+        let mut stack = vec![study.clone()];
+        while let Some(dir) = stack.pop() {
+            for f in std::fs::read_dir(&dir).unwrap().flatten() {
+                let p = f.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else {
+                    assert!(!p.extension().is_some_and(|x| x == "png"), "{}: figures are committed as SVG", p.display());
+                }
+            }
+        }
+        // Without comments and the replicate range, two files must still differ.
+        let core = |t: &String| -> Vec<String> {
+            t.lines()
+                .filter(|l| !l.trim_start().starts_with('#') && !l.starts_with("replicates:") && !l.starts_with("first_replicate:"))
+                .map(str::to_string)
+                .collect()
+        };
+        for (i, a) in pipelines.iter().enumerate() {
+            for b in &pipelines[i + 1..] {
+                assert_ne!(core(a), core(b), "{}: two pipeline files differ only in their replicates", study.display());
+            }
+        }
+    }
+    assert!(studies >= 15, "{studies} studies");
+}
+
 /// Every command the binary has answers `--help`, and docs/cli.md shows it: walking clap's
 /// own command tree, so a new command without a line there fails here.
 #[test]

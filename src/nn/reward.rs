@@ -62,7 +62,7 @@ pub enum CtrlAction {
     /// The action sent to the environment, clipped to the box.
     Clipped,
     /// The raw sampled action (the original code, and idrex's default: the ablation in
-    /// analysis/results/ablation.md found it decisive on HalfCheetah): saturating the
+    /// analysis/results/ablation/README.md found it decisive on HalfCheetah): saturating the
     /// actuators still costs, which keeps PPO's Gaussian inside the box.
     #[default]
     Raw,

@@ -88,7 +88,7 @@ pub struct PpoConfig {
     pub checkpoint_every: usize,
     /// Bootstrap episodes cut by the time limit with gamma V(s_final) (SB3); false (the
     /// default) treats the limit as termination (CleanRL, and the original code's baselines
-    /// PPO2). On learned rewards the bootstrap did worse (analysis/results/ablation.md).
+    /// PPO2). On learned rewards the bootstrap did worse (analysis/results/ablation/README.md).
     pub bootstrap_truncation: bool,
 }
 

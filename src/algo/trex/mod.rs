@@ -76,7 +76,7 @@ impl Default for TrexConfig {
             action_input: false,
             // The original code's N(0, 0.02^2): with libtorch's default init, no setting of
             // PPO's reward composition kept the learned reward's gains on HalfCheetah
-            // (analysis/results/ablation.md).
+            // (analysis/results/ablation/README.md).
             init: WeightInit::Normal002,
             precision: Precision::F32,
         }
