@@ -416,6 +416,7 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     s3_load(&base, smoke, &reference);
     s3_faults(&base, smoke, &reference);
     s3_server_killed(&base, &svc, smoke, &reference);
+    s3_outage_outlasts_the_retries(&base, &svc, smoke, &reference);
 
     // gc on the bucket keeps what a pipeline names and removes the rest; what stays is intact.
     let gc = ok(idrex(&base, &["gc", smoke, replicated, "--store", &s3("a"), "--yes"]));
@@ -569,6 +570,59 @@ fn s3_load(base: &Path, smoke: &str, reference: &Digests) {
     println!(
         "load (s3): 8 runs from 2 caches, {computed} computations of {nodes} nodes, verify and gc beside them {} times (clean, nothing named removed); {:.0} s",
         beside,
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// The S3 server down for longer than the retries last: the run ends with one line per
+/// stage it could not finish, each saying the server cannot be reached; what was published is
+/// intact (verify is clean), and once the server is back a re-run completes with a local run's
+/// bytes.
+fn s3_outage_outlasts_the_retries(base: &Path, svc: &Path, smoke: &str, reference: &Digests) {
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
+        .args(["pipeline", "run", smoke, "--store", &s3("o"), "--jobs", "2"])
+        .env("IDREX_S3_CACHE", base.join("cache-o"))
+        .current_dir(base)
+        .stdout(std::fs::File::create(base.join("outage.out")).unwrap())
+        .stderr(std::fs::File::create(base.join("outage.err")).unwrap())
+        .spawn()
+        .unwrap();
+    let remote = idrex::store::s3::Remote::connect(BUCKET, "o").unwrap();
+    while remote.keys().unwrap().len() < 4 {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was stopped");
+        assert!(started.elapsed() < Duration::from_secs(240), "no 4 artifacts published within 240 s");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    services(svc, "s3-stop");
+    let down = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(down.elapsed() < Duration::from_secs(600), "the run still waits 600 s into an outage");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let gave_up = down.elapsed();
+    services(svc, "s3-start");
+    let err = std::fs::read_to_string(base.join("outage.err")).unwrap();
+    assert!(!status.success(), "the run passed with the server down:\n{err}");
+    let failed: Vec<&str> = err.lines().filter(|l| l.starts_with("failed: ")).collect();
+    assert!(!failed.is_empty() && failed.iter().all(|l| l.contains("cannot reach")), "not one clear line per failed stage:\n{err}");
+    let retries = err.lines().filter(|l| l.contains("; retry ")).count();
+    let verified = ok(idrex(base, &["verify", "--store", &s3("o")]));
+    assert!(verified.contains(" 0 corrupt"), "{verified}");
+    let rerun = ok(idrex_with(
+        base,
+        &["pipeline", "run", smoke, "--store", &s3("o"), "--jobs", "2"],
+        &[("IDREX_S3_CACHE", base.join("cache-o").display().to_string())],
+    ));
+    assert!(rerun.contains("0 failed"), "{rerun}");
+    assert_eq!(&digests(&s3_store("o")), reference, "after an outage and a re-run, other bytes than a local run's");
+    println!(
+        "s3 outage: the server stopped after 4 artifacts; the run gave up {:.0} s later with {} stages failed, one line each ({retries} retries logged); verify clean; the re-run completed; {:.0} s",
+        gave_up.as_secs_f64(),
+        failed.len(),
         started.elapsed().as_secs_f64()
     );
 }

@@ -379,6 +379,17 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     if store.retried() > 0 {
         println!("{}: {} requests retried (each is in the log above)", store.location(), store.retried());
     }
+    // One line per failed stage first: the recordings read the store, which may be what failed.
+    for o in &outcomes {
+        if let Status::Failed { error, log } = &o.status {
+            let held_up = g
+                .descendants(&o.node)
+                .iter()
+                .filter(|d| outcomes.iter().any(|x| &x.node == *d && matches!(x.status, Status::Skipped { .. })))
+                .count();
+            eprintln!("failed: {} ({}): {error}; log: {}; {held_up} stages after it skipped", o.node, &o.key[..12], log.display());
+        }
+    }
     // One recording per environment: each env's nodes under their names within it.
     let mut recordings = Vec::new();
     for &env in &p.envs {
@@ -400,26 +411,13 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         println!("recording: {}", rec.display());
         recordings.push(rec.display().to_string());
     }
-    if failed.is_empty() {
-        println!(
-            "next: `idrex report --store {}` (tables and figures in report/), `rerun {}` (the plots)",
-            store.location(),
-            recordings.join(" ")
-        );
-    }
     if !failed.is_empty() {
-        // One line per failed stage: its cause, its log, and how much it held up.
-        for o in &outcomes {
-            if let Status::Failed { error, log } = &o.status {
-                let held_up = g
-                    .descendants(&o.node)
-                    .iter()
-                    .filter(|d| outcomes.iter().any(|x| &x.node == *d && matches!(x.status, Status::Skipped { .. })))
-                    .count();
-                eprintln!("failed: {} ({}): {error}; log: {}; {held_up} stages after it skipped", o.node, &o.key[..12], log.display());
-            }
-        }
         bail!("{} of {} stages did not complete", failed.len(), outcomes.len());
     }
+    println!(
+        "next: `idrex report --store {}` (tables and figures in report/), `rerun {}` (the plots)",
+        store.location(),
+        recordings.join(" ")
+    );
     Ok(())
 }
