@@ -8,7 +8,9 @@
 //! While no connection to the endpoint has ever been made, a refused connection gets two
 //! retries, so that a wrong endpoint fails within a second. Every retry is logged at `warn`
 //! with the request and the error (at `debug` before the server has ever answered: the
-//! one-line refusal that follows says it all).
+//! one-line refusal that follows says it all). Once a request has spent all its retries, the
+//! server is taken to be down: later requests that fail are not retried until one passes, so
+//! a long outage ends a run after one round of retries, not one round per request.
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
@@ -79,6 +81,8 @@ fn transient_status(text: &str) -> bool {
 #[derive(Debug, Default)]
 pub struct Retries {
     reached: AtomicBool,
+    /// A request spent all its retries and none has passed since.
+    down: AtomicBool,
     count: AtomicU64,
 }
 
@@ -94,13 +98,24 @@ impl Retries {
         &self,
         url: &str,
         what: &str,
+        attempt: impl FnMut() -> std::result::Result<T, object_store::Error>,
+    ) -> std::result::Result<T, object_store::Error> {
+        self.run_waiting(url, what, attempt, &std::thread::sleep)
+    }
+
+    fn run_waiting<T>(
+        &self,
+        url: &str,
+        what: &str,
         mut attempt: impl FnMut() -> std::result::Result<T, object_store::Error>,
+        sleep: &dyn Fn(Duration),
     ) -> std::result::Result<T, object_store::Error> {
         let mut n = 0;
         loop {
             let e = match attempt() {
                 Ok(v) => {
                     self.reached.store(true, Ordering::Relaxed);
+                    self.down.store(false, Ordering::Relaxed);
                     return Ok(v);
                 }
                 Err(e) => e,
@@ -108,12 +123,15 @@ impl Retries {
             if !unreachable(&e) {
                 self.reached.store(true, Ordering::Relaxed);
             }
-            if !transient(&e) {
+            // A server that outlasted a whole round of retries is down until a request passes:
+            // the next failing ones fail at once, so a run ends within one round, not one each.
+            if !transient(&e) || self.down.load(Ordering::Relaxed) {
                 return Err(e);
             }
             let reached = self.reached.load(Ordering::Relaxed);
             let limit = if reached { RETRIES } else { RETRIES_UNREACHED };
             if n >= limit {
+                self.down.store(reached, Ordering::Relaxed);
                 return Err(e);
             }
             let wait = backoff(n, jitter());
@@ -126,7 +144,7 @@ impl Retries {
             } else {
                 tracing::debug!("{line}");
             }
-            std::thread::sleep(wait);
+            sleep(wait);
         }
     }
 }
@@ -228,5 +246,58 @@ mod tests {
             Err(object_store::Error::NotFound { path: "x".into(), source: "gone".into() })
         });
         assert!(e.is_err() && tries == 1);
+    }
+
+    #[test]
+    fn after_one_request_spends_its_retries_the_next_failures_are_not_retried_until_one_passes() {
+        let r = Retries::default();
+        let no_wait = |_: Duration| {};
+        let refused = || object_store::Error::Generic {
+            store: "S3",
+            source: Box::new(object_store::client::HttpError::new(
+                object_store::client::HttpErrorKind::Request,
+                std::io::Error::other("reset"),
+            )),
+        };
+        let mut tries = 0;
+        assert!(
+            r.run_waiting::<()>(
+                "s3://b",
+                "x",
+                || {
+                    tries += 1;
+                    Err(refused())
+                },
+                &no_wait
+            )
+            .is_err()
+        );
+        assert_eq!(tries, 1 + RETRIES as usize);
+        let mut tries = 0;
+        assert!(
+            r.run_waiting::<()>(
+                "s3://b",
+                "y",
+                || {
+                    tries += 1;
+                    Err(refused())
+                },
+                &no_wait
+            )
+            .is_err()
+        );
+        assert_eq!(tries, 1, "the server is down: no second round");
+        assert_eq!(r.run_waiting("s3://b", "z", || Ok(1), &no_wait).unwrap(), 1);
+        let mut tries = 0;
+        let back = r.run_waiting(
+            "s3://b",
+            "w",
+            || {
+                tries += 1;
+                if tries < 3 { Err(refused()) } else { Ok(2) }
+            },
+            &no_wait,
+        );
+        assert_eq!((back.unwrap(), tries), (2, 3), "back up: failures are retried again");
     }
 }
