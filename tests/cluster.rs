@@ -477,46 +477,23 @@ fn s3_faults(base: &Path, smoke: &str, reference: &Digests) {
 /// half-written is published (verify is clean), and a re-run completes with a local run's
 /// bytes.
 fn s3_server_killed(base: &Path, svc: &Path, smoke: &str, reference: &Digests) {
-    let log = base.join("killed.log");
     let started = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
-        .args(["pipeline", "run", smoke, "--store", &s3("k"), "--jobs", "2"])
-        .env("IDREX_S3_CACHE", base.join("cache-k"))
-        .current_dir(base)
-        .stdout(std::fs::File::create(base.join("killed.out")).unwrap())
-        .stderr(std::fs::File::create(&log).unwrap())
-        .spawn()
-        .unwrap();
-    let remote = idrex::store::s3::Remote::connect(BUCKET, "k").unwrap();
-    while remote.keys().unwrap().len() < 8 {
-        assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was killed");
-        assert!(started.elapsed() < Duration::from_secs(240), "no 8 artifacts published within 240 s");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    let (mut child, remote) = run_until_published(base, smoke, "k", 8);
     let published_before = remote.keys().unwrap().len();
     services(svc, "s3-stop");
     std::thread::sleep(Duration::from_secs(3));
     services(svc, "s3-start");
     let status = child.wait().unwrap();
-    let err = std::fs::read_to_string(&log).unwrap();
+    let err = std::fs::read_to_string(base.join("run-k.err")).unwrap();
     let retries = err.lines().filter(|l| l.contains("; retry ")).count();
     let outcome = if status.success() {
         assert_eq!(&digests(&s3_store("k")), reference, "a run through a server restart stored other bytes");
         "rode it out"
     } else {
-        let failed: Vec<&str> = err.lines().filter(|l| l.starts_with("failed: ")).collect();
-        assert!(!failed.is_empty() && failed.iter().all(|l| l.contains("cannot reach")), "not one clear error per stage:\n{err}");
+        unreachable_stages(&err);
         "failed clearly"
     };
-    let verified = ok(idrex(base, &["verify", "--store", &s3("k")]));
-    assert!(verified.contains(" 0 corrupt"), "{verified}");
-    let rerun = ok(idrex_with(
-        base,
-        &["pipeline", "run", smoke, "--store", &s3("k"), "--jobs", "2"],
-        &[("IDREX_S3_CACHE", base.join("cache-k").display().to_string())],
-    ));
-    assert!(rerun.contains("0 failed"), "{rerun}");
-    assert_eq!(&digests(&s3_store("k")), reference, "after a server restart and a re-run, other bytes than a local run's");
+    verify_then_rerun(base, smoke, "k", reference);
     println!(
         "s3 killed: the server was killed after {published_before} of 28 artifacts and back 3 s later; the run {outcome} with {retries} retries logged; verify clean; {:.0} s",
         started.elapsed().as_secs_f64()
@@ -580,20 +557,7 @@ fn s3_load(base: &Path, smoke: &str, reference: &Digests) {
 /// bytes.
 fn s3_outage_outlasts_the_retries(base: &Path, svc: &Path, smoke: &str, reference: &Digests) {
     let started = Instant::now();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
-        .args(["pipeline", "run", smoke, "--store", &s3("o"), "--jobs", "2"])
-        .env("IDREX_S3_CACHE", base.join("cache-o"))
-        .current_dir(base)
-        .stdout(std::fs::File::create(base.join("outage.out")).unwrap())
-        .stderr(std::fs::File::create(base.join("outage.err")).unwrap())
-        .spawn()
-        .unwrap();
-    let remote = idrex::store::s3::Remote::connect(BUCKET, "o").unwrap();
-    while remote.keys().unwrap().len() < 4 {
-        assert!(child.try_wait().unwrap().is_none(), "the run ended before the server was stopped");
-        assert!(started.elapsed() < Duration::from_secs(240), "no 4 artifacts published within 240 s");
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    let (mut child, _) = run_until_published(base, smoke, "o", 4);
     services(svc, "s3-stop");
     let down = Instant::now();
     let status = loop {
@@ -605,24 +569,54 @@ fn s3_outage_outlasts_the_retries(base: &Path, svc: &Path, smoke: &str, referenc
     };
     let gave_up = down.elapsed();
     services(svc, "s3-start");
-    let err = std::fs::read_to_string(base.join("outage.err")).unwrap();
+    let err = std::fs::read_to_string(base.join("run-o.err")).unwrap();
     assert!(!status.success(), "the run passed with the server down:\n{err}");
-    let failed: Vec<&str> = err.lines().filter(|l| l.starts_with("failed: ")).collect();
-    assert!(!failed.is_empty() && failed.iter().all(|l| l.contains("cannot reach")), "not one clear line per failed stage:\n{err}");
+    let failed = unreachable_stages(&err);
     let retries = err.lines().filter(|l| l.contains("; retry ")).count();
-    let verified = ok(idrex(base, &["verify", "--store", &s3("o")]));
-    assert!(verified.contains(" 0 corrupt"), "{verified}");
-    let rerun = ok(idrex_with(
-        base,
-        &["pipeline", "run", smoke, "--store", &s3("o"), "--jobs", "2"],
-        &[("IDREX_S3_CACHE", base.join("cache-o").display().to_string())],
-    ));
-    assert!(rerun.contains("0 failed"), "{rerun}");
-    assert_eq!(&digests(&s3_store("o")), reference, "after an outage and a re-run, other bytes than a local run's");
+    verify_then_rerun(base, smoke, "o", reference);
     println!(
         "s3 outage: the server stopped after 4 artifacts; the run gave up {:.0} s later with {} stages failed, one line each ({retries} retries logged); verify clean; the re-run completed; {:.0} s",
         gave_up.as_secs_f64(),
         failed.len(),
         started.elapsed().as_secs_f64()
     );
+}
+
+/// Starts the smoke pipeline into prefix `p` (a cache of its own; output in `run-<p>.out` and
+/// `.err`) and returns once `n` artifacts are published, with the bucket's handle.
+fn run_until_published(base: &Path, smoke: &str, p: &str, n: usize) -> (std::process::Child, idrex::store::s3::Remote) {
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_idrex"))
+        .args(["pipeline", "run", smoke, "--store", &s3(p), "--jobs", "2"])
+        .env("IDREX_S3_CACHE", base.join(format!("cache-{p}")))
+        .current_dir(base)
+        .stdout(std::fs::File::create(base.join(format!("run-{p}.out"))).unwrap())
+        .stderr(std::fs::File::create(base.join(format!("run-{p}.err"))).unwrap())
+        .spawn()
+        .unwrap();
+    let remote = idrex::store::s3::Remote::connect(BUCKET, p).unwrap();
+    while remote.keys().unwrap().len() < n {
+        assert!(child.try_wait().unwrap().is_none(), "the run ended before {n} artifacts were published");
+        assert!(started.elapsed() < Duration::from_secs(240), "no {n} artifacts published within 240 s");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    (child, remote)
+}
+
+/// The `failed:` lines of a run's stderr: at least one, each saying the server cannot be reached.
+fn unreachable_stages(err: &str) -> Vec<&str> {
+    let failed: Vec<&str> = err.lines().filter(|l| l.starts_with("failed: ")).collect();
+    assert!(!failed.is_empty() && failed.iter().all(|l| l.contains("cannot reach")), "not one clear line per failed stage:\n{err}");
+    failed
+}
+
+/// After a fault on prefix `p`: verify is clean, and a re-run (same cache) completes with a
+/// local run's bytes.
+fn verify_then_rerun(base: &Path, smoke: &str, p: &str, reference: &Digests) {
+    let verified = ok(idrex(base, &["verify", "--store", &s3(p)]));
+    assert!(verified.contains(" 0 corrupt"), "{verified}");
+    let cache = base.join(format!("cache-{p}")).display().to_string();
+    let rerun = ok(idrex_with(base, &["pipeline", "run", smoke, "--store", &s3(p), "--jobs", "2"], &[("IDREX_S3_CACHE", cache)]));
+    assert!(rerun.contains("0 failed"), "{rerun}");
+    assert_eq!(&digests(&s3_store(p)), reference, "after the fault on {p} and a re-run, other bytes than a local run's");
 }

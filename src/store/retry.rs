@@ -182,6 +182,14 @@ pub(super) fn clean(e: &(dyn std::error::Error + 'static)) -> String {
 mod tests {
     use super::*;
 
+    /// A transport failure of `kind`, as object_store reports it.
+    fn http(kind: object_store::client::HttpErrorKind) -> object_store::Error {
+        object_store::Error::Generic {
+            store: "S3",
+            source: Box::new(object_store::client::HttpError::new(kind, std::io::Error::other("transport"))),
+        }
+    }
+
     #[test]
     fn waits_double_to_a_ceiling_and_the_whole_budget_outlasts_a_restart() {
         assert_eq!(backoff(0, 1.0), Duration::from_secs_f64(0.2));
@@ -197,16 +205,14 @@ mod tests {
 
     #[test]
     fn only_failures_that_may_pass_are_retried() {
-        let timeout = object_store::client::HttpError::new(object_store::client::HttpErrorKind::Timeout, std::io::Error::other("slow"));
-        let timeout = object_store::Error::Generic { store: "S3", source: Box::new(timeout) };
+        let timeout = http(object_store::client::HttpErrorKind::Timeout);
         assert!(transient(&timeout) && !unreachable(&timeout));
         let generic = |text: &str| object_store::Error::Generic { store: "S3", source: text.to_string().into() };
         assert!(transient(&generic("Server returned non-2xx status code: 503 Service Unavailable: SlowDown")));
         assert!(transient(&generic("Server returned non-2xx status code: 429 Too Many Requests: ")));
         assert!(!transient(&generic("Server returned non-2xx status code: 400 Bad Request: ")));
         assert!(!transient(&generic("Received redirect without LOCATION")));
-        let http = object_store::client::HttpError::new(object_store::client::HttpErrorKind::Connect, std::io::Error::other("refused"));
-        assert!(transient(&object_store::Error::Generic { store: "S3", source: Box::new(http) }));
+        assert!(transient(&http(object_store::client::HttpErrorKind::Connect)));
         assert!(!transient(&object_store::Error::NotFound { path: "x".into(), source: "gone".into() }));
         assert!(!transient(&object_store::Error::PermissionDenied { path: "x".into(), source: "SignatureDoesNotMatch".into() }));
     }
@@ -214,13 +220,7 @@ mod tests {
     #[test]
     fn a_server_that_never_answered_is_given_up_on_quickly_and_retries_are_counted() {
         let r = Retries::default();
-        let refused = || object_store::Error::Generic {
-            store: "S3",
-            source: Box::new(object_store::client::HttpError::new(
-                object_store::client::HttpErrorKind::Connect,
-                std::io::Error::other("refused"),
-            )),
-        };
+        let refused = || http(object_store::client::HttpErrorKind::Connect);
         let mut tries = 0;
         assert!(
             r.run::<()>("s3://b", "reading x", || {
@@ -252,13 +252,7 @@ mod tests {
     fn after_one_request_spends_its_retries_the_next_failures_are_not_retried_until_one_passes() {
         let r = Retries::default();
         let no_wait = |_: Duration| {};
-        let refused = || object_store::Error::Generic {
-            store: "S3",
-            source: Box::new(object_store::client::HttpError::new(
-                object_store::client::HttpErrorKind::Request,
-                std::io::Error::other("reset"),
-            )),
-        };
+        let refused = || http(object_store::client::HttpErrorKind::Request);
         let mut tries = 0;
         assert!(
             r.run_waiting::<()>(
