@@ -25,6 +25,8 @@ env.unwrapped.set_state(np.array(state["qpos"]), np.array(state["qvel"]))
 actions = np.loadtxt(args.actions, delimiter=",", ndmin=2)
 for t, a in enumerate(actions):
     obs, reward, term, trunc, info = env.step(a)
+    # Ant's contact cost; the planar tasks have none.
+    contact = {"reward_contact": float(info["reward_contact"])} if "reward_contact" in info else {}
     print(json.dumps({
         "step": t,
         "obs": obs.tolist(),
@@ -36,6 +38,7 @@ for t, a in enumerate(actions):
         "reward_survive": float(info.get("reward_survive", 0.0)),
         "x_position": float(info["x_position"]),
         "x_velocity": float(info["x_velocity"]),
+        **contact,
     }))
     if term or trunc:
         break

@@ -211,6 +211,54 @@ print("ok")
     assert_eq!(py(protocols_check, &args).trim(), "ok");
     assert!(md.contains("SELECTED WITH THE GROUND-TRUTH REWARD"), "{md}");
 
+    // An archive of the stages' manifests rebuilds the same report, figures and all, with no
+    // store at all, and with the store beside it; an edited definition is refused.
+    let archive = dir.join("smoke.ndjson");
+    let ex = idrex(&[
+        "export",
+        repo("pipelines/smoke.yaml").to_str().unwrap(),
+        "--store",
+        store.to_str().unwrap(),
+        "--out",
+        archive.to_str().unwrap(),
+    ]);
+    assert!(ex.status.success() && stdout(&ex).contains(": 28 of 28 stages' manifests"), "{}{}", stdout(&ex), stderr(&ex));
+    for (name, with_store) in [("report-archive", false), ("report-both", true)] {
+        let again = dir.join(name);
+        let store_arg = if with_store { store.clone() } else { dir.join("no-store-here") };
+        let rep = idrex(&[
+            "report",
+            "--store",
+            store_arg.to_str().unwrap(),
+            "--archive",
+            archive.to_str().unwrap(),
+            "--out",
+            again.to_str().unwrap(),
+        ]);
+        assert!(rep.status.success(), "{name}: {}", stderr(&rep));
+        let files = walk(&out_dir);
+        assert!(files.len() > 10, "{files:?}");
+        for f in files {
+            let rel = f.strip_prefix(&out_dir).unwrap();
+            assert!(std::fs::read(&f).unwrap() == std::fs::read(again.join(rel)).unwrap(), "{name}: {} differs", rel.display());
+        }
+    }
+    let text = std::fs::read_to_string(&archive).unwrap();
+    let mut first: serde_json::Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    first["seed"] = serde_json::json!(first["seed"].as_u64().unwrap() + 1);
+    let edited = dir.join("edited.ndjson");
+    std::fs::write(&edited, text.replacen(text.lines().next().unwrap(), &first.to_string(), 1)).unwrap();
+    let rep = idrex(&[
+        "report",
+        "--store",
+        store.to_str().unwrap(),
+        "--archive",
+        edited.to_str().unwrap(),
+        "--out",
+        dir.join("x").to_str().unwrap(),
+    ]);
+    assert!(!rep.status.success() && stderr(&rep).contains("edited.ndjson: line 1: key"), "{}", stderr(&rep));
+
     // A flipped byte: verify reports it, a run recomputes exactly that artifact.
     let victim = mcaps[0].clone();
     let mut bytes = std::fs::read(&victim).unwrap();
@@ -645,4 +693,49 @@ print("ok")
     } else {
         crate::util::skip("pipeline::(the disagreeing-demonstrations case)", &format!("{} is not here", npz.display()));
     }
+}
+
+/// Ant-v5 through every method at the smoke file's budgets: its own demonstrator, BC, D-REX
+/// and the three iD-REX variants all report; its rollout files carry the contact term and
+/// open in Python's mcap reader with their schema's fields.
+#[test]
+fn ant_runs_through_every_method() {
+    let dir = TempDir::new("ant");
+    let store = dir.join("store");
+    let smoke = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
+    let file = dir.join("ant.yaml");
+    std::fs::write(&file, smoke.replace("env: Hopper-v5", "name: ant-smoke\nenv: Ant-v5")).unwrap();
+    let rec = dir.join("ant.rrd");
+    let out = idrex(&["pipeline", "run", file.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
+    assert!(out.status.success(), "{}\n{}", stdout(&out), stderr(&out));
+    let report = dir.join("report");
+    let rep = idrex(&["report", "--store", store.to_str().unwrap(), "--out", report.to_str().unwrap()]);
+    assert!(rep.status.success(), "{}", stderr(&rep));
+    let check = r#"
+import csv, sys
+rows = [r for r in csv.DictReader(open(sys.argv[1])) if r["env"] == "Ant-v5"]
+assert {r["method"] for r in rows} == {"bc", "drex", "idrex-interpolation", "idrex-action-noise", "idrex-multi-bc"}, rows
+assert all(float(r["mean"]) == float(r["mean"]) for r in rows)
+print("ok")
+"#;
+    assert_eq!(py(check, &[report.join("returns.csv").to_str().unwrap()]).trim(), "ok");
+    let mcaps: Vec<String> =
+        walk(&store).into_iter().filter(|p| p.extension().is_some_and(|e| e == "mcap")).map(|p| p.display().to_string()).collect();
+    let fields = r#"
+import json, sys
+from mcap.reader import make_reader
+steps = 0
+for path in sys.argv[1:]:
+    r = make_reader(open(path, "rb"))
+    for schema, channel, msg in r.iter_messages(topics=["/step"]):
+        m = json.loads(msg.data)
+        assert set(json.loads(schema.data)["properties"]) >= set(m), (path, set(m))
+        assert len(m["obs"]) == 105 and len(m["action"]) == 8 and m["reward_contact"] <= 0, m
+        total = m["reward_forward"] + m["reward_ctrl"] + m["reward_survive"] + m["reward_contact"]
+        assert abs(total - m["reward"]) < 1e-9, m
+        steps += 1
+print(steps)
+"#;
+    let args: Vec<&str> = mcaps.iter().map(String::as_str).collect();
+    assert!(py(fields, &args).trim().parse::<usize>().unwrap() > 100);
 }

@@ -26,6 +26,13 @@ pub struct EnvBenchArgs {
     /// Python with gymnasium[mujoco] for the Gymnasium baseline; "none" skips it.
     #[arg(long)]
     pub python: Option<String>,
+    /// Python with EnvPool 1.2.5 (`analysis/envpool/env.sh` prints it): measure EnvPool's
+    /// environments beside idrex's, one and in batches of 8 and 64 on one and two threads.
+    #[arg(long, value_name = "PYTHON")]
+    pub envpool: Option<String>,
+    /// Alternating passes per side in the EnvPool comparison (each ratio is of medians).
+    #[arg(long, default_value_t = 5)]
+    pub runs: usize,
     /// Print the results as one JSON object per environment.
     #[arg(long)]
     pub json: bool,
@@ -86,7 +93,7 @@ pub(super) fn raw_pass(env: &mut Env, actions: &[Vec<f64>], ends: &[usize]) -> f
     (actions.len() * env.spec().frame_skip) as f64 / start.elapsed().as_secs_f64()
 }
 
-fn vec_pass(id: EnvId, n: usize, threads: usize, steps: usize) -> anyhow::Result<f64> {
+pub(super) fn vec_pass(id: EnvId, n: usize, threads: usize, steps: usize) -> anyhow::Result<f64> {
     let mut v = VecEnv::new(id, n, 0, threads)?;
     let actions: Vec<f32> = random_actions(steps / n, n * v.act_dim(), 1).concat().into_iter().map(|x| x as f32).collect();
     let start = Instant::now();
@@ -133,6 +140,7 @@ pub fn measure_env(id: EnvId, args: &EnvBenchArgs) -> anyhow::Result<EnvBench> {
         Some(p) => Some(gymnasium_pass(&p, id, args.steps.min(20_000))?),
         None => None,
     };
+
     Ok(EnvBench {
         env: id.name().into(),
         frame_skip,
@@ -149,8 +157,14 @@ pub fn measure_env(id: EnvId, args: &EnvBenchArgs) -> anyhow::Result<EnvBench> {
     })
 }
 
-pub fn env_bench(args: &EnvBenchArgs) -> anyhow::Result<()> {
-    let ids = if args.envs.is_empty() { EnvId::ALL.to_vec() } else { args.envs.clone() };
+/// The environments a run measures: those named, else all.
+pub fn ids(args: &EnvBenchArgs) -> Vec<EnvId> {
+    if args.envs.is_empty() { EnvId::ALL.to_vec() } else { args.envs.clone() }
+}
+
+/// The table of idrex's environments against mj_step and Gymnasium.
+pub fn table(args: &EnvBenchArgs) -> anyhow::Result<()> {
+    let ids = ids(args);
     if !args.json {
         println!(
             "| env | mj_step/s | mj-bound env steps/s | env steps/s (1 thread) | vs bound | vec {n} envs, 1 thread | vec, {t} threads | speed-up | Gymnasium steps/s | vs Gymnasium |",

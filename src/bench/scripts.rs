@@ -9,6 +9,8 @@ use anyhow::Context;
 pub enum Script {
     /// Gymnasium's Python environment stepped with random actions (`bench env`).
     GymBench,
+    /// EnvPool's environments, one and in batches (`bench env --envpool`).
+    EnvpoolBench,
     /// Stable-Baselines3's PPO at CleanRL's settings (`bench ppo`).
     BenchPpo,
     /// The T-REX and BC loops in PyTorch (`bench learners`).
@@ -19,6 +21,7 @@ impl Script {
     pub fn file_name(self) -> &'static str {
         match self {
             Script::GymBench => "gym_bench.py",
+            Script::EnvpoolBench => "envpool_bench.py",
             Script::BenchPpo => "bench_ppo.py",
             Script::BenchLearners => "bench_learners.py",
         }
@@ -27,6 +30,7 @@ impl Script {
     fn text(self) -> &'static str {
         match self {
             Script::GymBench => include_str!("../../analysis/gym_bench.py"),
+            Script::EnvpoolBench => include_str!("../../analysis/envpool_bench.py"),
             Script::BenchPpo => include_str!("../../analysis/bench_ppo.py"),
             Script::BenchLearners => include_str!("../../analysis/bench_learners.py"),
         }
@@ -54,7 +58,7 @@ mod tests {
     /// The compiled-in texts are the scripts' (no path into the clone is kept).
     #[test]
     fn every_script_is_compiled_in() {
-        for s in [Script::GymBench, Script::BenchPpo, Script::BenchLearners] {
+        for s in [Script::GymBench, Script::EnvpoolBench, Script::BenchPpo, Script::BenchLearners] {
             assert!(s.text().contains("import argparse") && s.text().len() > 500, "{}", s.file_name());
         }
         let e = Script::GymBench.run("/nonexistent/python", &[]).unwrap_err().to_string();

@@ -44,7 +44,7 @@ pub fn run(cmd: &EnvCommand) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     for (t, action) in actions.iter().enumerate() {
         let info = env.step(action, &mut obs)?;
-        let line = serde_json::json!({
+        let mut line = serde_json::json!({
             "step": t,
             "obs": obs,
             "reward": info.reward,
@@ -56,6 +56,9 @@ pub fn run(cmd: &EnvCommand) -> anyhow::Result<()> {
             "x_position": info.x_position,
             "x_velocity": info.x_velocity,
         });
+        if env.spec().contact.is_some() {
+            line["reward_contact"] = serde_json::json!(info.terms.reward_contact);
+        }
         writeln!(out, "{line}")?;
         if info.terminated || info.truncated {
             break;

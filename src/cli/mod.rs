@@ -81,6 +81,10 @@ pub enum Command {
     Verify(store::StoreArgs),
     /// Remove artifacts that no given pipeline file references (a dry run unless --yes).
     Gc(store::GcArgs),
+    /// Write the manifests of a pipeline's stored stages (parameters, metrics, output digests;
+    /// no outputs) to one file to commit: `idrex report --archive` rebuilds the report from it
+    /// on any machine.
+    Export(store::ExportArgs),
     /// Reopen MCAP rollout files.
     #[command(subcommand)]
     Logs(logs::LogsCommand),
@@ -163,6 +167,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Stage(cmd) => stage::run(&cmd),
         Command::Verify(args) => store::verify(&args),
         Command::Gc(args) => store::gc(&args),
+        Command::Export(args) => store::export(&args),
         Command::Logs(cmd) => logs::run(&cmd),
         Command::Report(args) => report::run(&args),
         Command::Exp(cmd) => exp::run(&cmd),

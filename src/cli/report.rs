@@ -33,20 +33,41 @@ pub struct ReportArgs {
     /// The figures' files (`svg` for what is committed: half the size, and it scales).
     #[arg(long, value_enum, default_value_t = crate::report::figures::FigureFormats::Both)]
     pub figures: crate::report::figures::FigureFormats,
+    /// An archive of a study's manifests (`idrex export`) to report with the store's results
+    /// (repeatable); with archives only, the store may be absent.
+    #[arg(long, value_name = "FILE.ndjson")]
+    pub archive: Vec<PathBuf>,
     /// A Rerun recording the HTML page links to (repeatable).
     #[arg(long, value_name = "FILE.rrd")]
     pub recording: Vec<PathBuf>,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
-    let store =
-        super::store::existing(&args.store, false, "run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`) or give --store")?;
-    let handle = store;
-    let store = crate::report::Artifacts::read(&handle)?;
+    let absent = matches!(crate::store::Location::parse(&args.store)?, crate::store::Location::Local(d) if !d.is_dir());
+    let handle = if absent && !args.archive.is_empty() {
+        None
+    } else {
+        Some(super::store::existing(
+            &args.store,
+            false,
+            "run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`), give --store, or report from --archive files",
+        )?)
+    };
+    let mut store = match &handle {
+        Some(h) => crate::report::Artifacts::read(h)?,
+        None => crate::report::Artifacts::default(),
+    };
+    for a in &args.archive {
+        let added = store.add_archive(a)?;
+        tracing::info!("{}: {added} artifacts not in the store", a.display());
+    }
     let building = crate::log::progress::Activity::start("report: tables, intervals and figures");
     let t = crate::report::build(&store)?;
     if t.returns.is_empty() {
-        bail!("{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)", args.store);
+        bail!(
+            "{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)",
+            if handle.is_some() { args.store.clone() } else { "the archives".into() }
+        );
     }
     let mut comparisons = Vec::new();
     for pair in &args.compare {
@@ -92,7 +113,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     if args.format == ReportFormat::Html {
         use crate::report::html;
         let recordings = args.recording.iter().map(|r| std::fs::canonicalize(r).unwrap_or(r.clone()).display().to_string()).collect();
-        let links = html::Links { rollouts: html::rollout_links(&store, &handle), recordings };
+        let links = html::Links { rollouts: html::rollout_links(&store, handle.as_ref()), recordings };
         let page = args.out.join("report.html");
         std::fs::write(&page, html::page(&md, &args.out, &links)).with_context(|| format!("cannot write {}", page.display()))?;
         eprintln!("wrote {}", page.display());

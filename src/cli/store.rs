@@ -51,6 +51,51 @@ pub struct GcArgs {
     pub table: super::TableArgs,
 }
 
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// The pipeline file whose stored artifacts are exported.
+    pub file: PathBuf,
+    /// Artifact store directory or `s3://bucket/prefix` (default: the file's `store`).
+    #[arg(long)]
+    pub store: Option<String>,
+    /// Only replicate R's stages (a replicated study).
+    #[arg(long, value_name = "R")]
+    pub only_replicate: Option<usize>,
+    /// The archive to write: NDJSON, one manifest per line (`idrex report --archive` reads it).
+    #[arg(long, value_name = "FILE.ndjson")]
+    pub out: PathBuf,
+}
+
+/// Writes the manifests of the file's stored stages to an archive; names those not stored.
+pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
+    let (p, store) = super::pipeline::load(&args.file, args.store.as_deref(), None, super::pipeline::StoreAccess::Read)?;
+    let p = match args.only_replicate {
+        Some(r) => p.only_replicate(r).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
+        None => p,
+    };
+    store.index()?;
+    let keys = crate::pipeline::expand(&p)?.keys();
+    let mut texts = std::collections::BTreeMap::new();
+    let mut missing = Vec::new();
+    for (node, key) in &keys {
+        if store.lookup(key)?.is_some() {
+            texts.insert(key.clone(), store.manifest_text(key)?);
+        } else {
+            missing.push(node.as_str());
+        }
+    }
+    if texts.is_empty() {
+        bail!("{}: none of its {} stages is in {}; run it first or give --store", args.file.display(), keys.len(), store.location());
+    }
+    crate::store::archive::write(&args.out, &texts)?;
+    let bytes = std::fs::metadata(&args.out).map_or(0, |m| m.len());
+    println!("{}: {} of {} stages' manifests ({bytes} bytes)", args.out.display(), texts.len(), keys.len());
+    if let Some(first) = missing.first() {
+        println!("not stored, so not exported: {} stages (first: {first})", missing.len());
+    }
+    Ok(())
+}
+
 pub fn verify(args: &StoreArgs) -> anyhow::Result<()> {
     // Recomputing stages into the store's .tmp; only checking writes nothing.
     let store = existing(&args.store, args.recompute.is_some(), GIVE_STORE)?;

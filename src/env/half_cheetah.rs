@@ -8,7 +8,7 @@
 //! | reward | forward = dx/dt; ctrl = -0.1 * ‖a‖²; no survival term |
 //! | termination | never; truncation after 1000 steps |
 //! | reset | qpos0 + U(-0.1, 0.1), qvel0 + 0.1 * N(0, 1) |
-use super::{EnvSpec, ResetNoise};
+use super::{EnvSpec, Forward, ResetNoise};
 
 pub const SPEC: EnvSpec = EnvSpec {
     name: "HalfCheetah-v5",
@@ -18,6 +18,9 @@ pub const SPEC: EnvSpec = EnvSpec {
     ctrl_cost_weight: 0.1,
     health: None,
     obs_qvel_clip: None,
+    obs_skip_qpos: 1,
+    forward: Forward::Qpos0,
+    contact: None,
     reset_noise: ResetNoise::UniformGaussian(0.1),
     max_episode_steps: 1000,
 };

@@ -1,13 +1,14 @@
 //! Gymnasium-v5 MuJoCo locomotion environments on mujoco-rs.
 //!
 //! One generic [`Env`] runs every task; each task is a [`EnvSpec`] in its own file
-//! ([`half_cheetah`], [`hopper`], [`walker2d`]) whose numbers are Gymnasium's v5 defaults.
+//! ([`half_cheetah`], [`hopper`], [`walker2d`], [`ant`]) whose numbers are Gymnasium's v5
+//! defaults.
 //! Equivalence with Gymnasium (observations, each reward term, termination, truncation) is
 //! checked by `tests/env_equivalence.rs`, which replays the same actions in both.
 //!
 //! Departures, none of which change a transition: Gymnasium calls `mj_rnePostConstraint`
-//! after stepping, which only fills force outputs (`cacc`, `cfrc_*`) that no observation or
-//! reward of these tasks reads, so we skip it; our reset noise comes from a seeded ChaCha8
+//! after stepping, which only fills force outputs (`cacc`, `cfrc_*`); we call it only for
+//! the task that reads them (Ant's contact forces); our reset noise comes from a seeded ChaCha8
 //! generator, not numpy's, so seeds are reproducible here but not shared with Gymnasium.
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -19,12 +20,15 @@ use rand_distr::StandardNormal;
 
 use crate::error::{Error, Result};
 
+pub mod ant;
 pub mod half_cheetah;
 pub mod hopper;
 pub mod replay;
+mod spec;
 pub mod vec_env;
 pub mod walker2d;
 
+pub use spec::{Contact, EnvSpec, Forward, Health, ResetNoise};
 pub use vec_env::{VecEnv, VecStep};
 
 /// The environments idrex knows, by their Gymnasium ids.
@@ -36,10 +40,12 @@ pub enum EnvId {
     Hopper,
     #[serde(rename = "Walker2d-v5")]
     Walker2d,
+    #[serde(rename = "Ant-v5")]
+    Ant,
 }
 
 impl EnvId {
-    pub const ALL: [EnvId; 3] = [EnvId::HalfCheetah, EnvId::Hopper, EnvId::Walker2d];
+    pub const ALL: [EnvId; 4] = [EnvId::HalfCheetah, EnvId::Hopper, EnvId::Walker2d, EnvId::Ant];
 
     pub fn name(self) -> &'static str {
         self.spec().name
@@ -50,6 +56,7 @@ impl EnvId {
             EnvId::HalfCheetah => &half_cheetah::SPEC,
             EnvId::Hopper => &hopper::SPEC,
             EnvId::Walker2d => &walker2d::SPEC,
+            EnvId::Ant => &ant::SPEC,
         }
     }
 }
@@ -70,55 +77,21 @@ impl std::str::FromStr for EnvId {
     }
 }
 
-/// The health conditions of the legged robots; outside them the episode terminates.
-#[derive(Debug, Clone, Copy)]
-pub struct Health {
-    /// Paid per step while healthy (v5 pays nothing once unhealthy).
-    pub reward: f64,
-    /// Open interval for the torso height qpos[1].
-    pub z_range: (f64, f64),
-    /// Open interval for the torso angle qpos[2].
-    pub angle_range: (f64, f64),
-    /// Open interval for every element of state_vector()[2:], where the task checks it.
-    pub state_range: Option<(f64, f64)>,
-}
-
-/// How `reset` perturbs the initial state `qpos0`, `qvel = 0`.
-#[derive(Debug, Clone, Copy)]
-pub enum ResetNoise {
-    /// qpos + U(-s, s) and qvel + U(-s, s).
-    Uniform(f64),
-    /// qpos + U(-s, s) and qvel + s * N(0, 1).
-    UniformGaussian(f64),
-}
-
-/// Everything that distinguishes one locomotion task from another.
-#[derive(Debug, Clone, Copy)]
-pub struct EnvSpec {
-    pub name: &'static str,
-    pub xml_file: &'static str,
-    pub frame_skip: usize,
-    pub forward_reward_weight: f64,
-    pub ctrl_cost_weight: f64,
-    pub health: Option<Health>,
-    /// Velocities in the observation are clipped to +-this, where set.
-    pub obs_qvel_clip: Option<f64>,
-    pub reset_noise: ResetNoise,
-    pub max_episode_steps: usize,
-}
-
-/// Each term of the reward as Gymnasium's `info` reports it; `reward = forward + ctrl + survive`.
+/// Each term of the reward as Gymnasium's `info` reports it;
+/// `reward = forward + ctrl + survive + contact`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct RewardTerms {
     pub reward_forward: f64,
     /// Minus the control cost.
     pub reward_ctrl: f64,
     pub reward_survive: f64,
+    /// Minus the contact cost (0 for the tasks without one).
+    pub reward_contact: f64,
 }
 
 impl RewardTerms {
     pub fn total(&self) -> f64 {
-        self.reward_forward + self.reward_ctrl + self.reward_survive
+        self.reward_forward + self.reward_ctrl + self.reward_survive + self.reward_contact
     }
 }
 
@@ -175,6 +148,8 @@ pub struct Env {
     data: MjData<Arc<MjModel>>,
     init_qpos: Vec<f64>,
     init_qvel: Vec<f64>,
+    /// Bodies in the model, the world included (Ant observes the other bodies' contact forces).
+    nbody: usize,
     action_low: Vec<f64>,
     action_high: Vec<f64>,
     dt: f64,
@@ -191,7 +166,7 @@ impl Env {
     /// Builds an environment on an already loaded model (vectorised envs share one).
     pub fn with_model(id: EnvId, model: Arc<MjModel>) -> Self {
         let spec = id.spec();
-        let (nu, timestep) = (model.ffi().nu as usize, model.ffi().opt.timestep);
+        let (nu, timestep, nbody) = (model.ffi().nu as usize, model.ffi().opt.timestep, model.ffi().nbody as usize);
         // SAFETY: actuator_ctrlrange holds nu x 2 numbers for the model's lifetime.
         let range = unsafe { std::slice::from_raw_parts(model.ffi().actuator_ctrlrange, 2 * nu) };
         let action_low = range.iter().step_by(2).copied().collect();
@@ -204,6 +179,7 @@ impl Env {
             data,
             init_qpos,
             init_qvel,
+            nbody,
             action_low,
             action_high,
             dt: timestep * spec.frame_skip as f64,
@@ -224,9 +200,11 @@ impl Env {
     pub fn act_dim(&self) -> usize {
         self.action_low.len()
     }
-    /// qpos[1:] and qvel: the x position is never observed.
+    /// qpos without its first `obs_skip_qpos` entries, qvel, and where the task observes
+    /// them, the contact forces of every body but the world (6 each).
     pub fn obs_dim(&self) -> usize {
-        self.nq() - 1 + self.nv()
+        let contact = if self.spec.contact.is_some() { 6 * (self.nbody - 1) } else { 0 };
+        self.nq() - self.spec.obs_skip_qpos + self.nv() + contact
     }
     pub fn action_bounds(&self) -> (&[f64], &[f64]) {
         (&self.action_low, &self.action_high)
@@ -289,8 +267,9 @@ impl Env {
     /// Writes the observation of the current state into `obs` (length [`Env::obs_dim`]).
     pub fn observe(&self, obs: &mut [f64]) {
         let (qpos, qvel) = (self.data.qpos(), self.data.qvel());
-        let np = qpos.len() - 1;
-        obs[..np].copy_from_slice(&qpos[1..]);
+        let skip = self.spec.obs_skip_qpos;
+        let np = qpos.len() - skip;
+        obs[..np].copy_from_slice(&qpos[skip..]);
         let vel = &mut obs[np..np + qvel.len()];
         vel.copy_from_slice(qvel);
         if let Some(c) = self.spec.obs_qvel_clip {
@@ -298,14 +277,44 @@ impl Env {
                 *v = v.clamp(-c, c);
             }
         }
+        if let Some(c) = self.spec.contact {
+            let (lo, hi) = c.force_range;
+            let forces = self.data.cfrc_ext()[1..].iter().flatten();
+            for (o, f) in obs[np + qvel.len()..].iter_mut().zip(forces) {
+                *o = f.clamp(lo, hi);
+            }
+        }
     }
 
     fn is_healthy(&self) -> bool {
-        let Some(h) = self.spec.health else { return true };
         let q = self.data.qpos();
-        let inside = |(lo, hi): (f64, f64), x: f64| lo < x && x < hi;
-        let state_ok = h.state_range.is_none_or(|r| q[2..].iter().chain(self.data.qvel()).all(|&x| inside(r, x)));
-        state_ok && inside(h.z_range, q[1]) && inside(h.angle_range, q[2])
+        let open = |(lo, hi): (f64, f64), x: f64| lo < x && x < hi;
+        match self.spec.health {
+            None => true,
+            Some(Health::Planar { z_range, angle_range, state_range, .. }) => {
+                let state_ok = state_range.is_none_or(|r| q[2..].iter().chain(self.data.qvel()).all(|&x| open(r, x)));
+                state_ok && open(z_range, q[1]) && open(angle_range, q[2])
+            }
+            Some(Health::Upright { z_range: (lo, hi), .. }) => {
+                q.iter().chain(self.data.qvel()).all(|x| x.is_finite()) && lo <= q[2] && q[2] <= hi
+            }
+        }
+    }
+
+    /// The coordinate the forward velocity is measured on (see [`Forward`]).
+    fn forward_x(&self) -> f64 {
+        match self.spec.forward {
+            Forward::Qpos0 => self.data.qpos()[0],
+            Forward::BodyXpos(b) => self.data.xpos()[b][0],
+        }
+    }
+
+    /// Minus the contact cost: the weight times the squared clipped forces of every body.
+    fn contact_reward(&self) -> f64 {
+        let Some(c) = self.spec.contact else { return 0.0 };
+        let (lo, hi) = c.force_range;
+        let squares: Vec<f64> = self.data.cfrc_ext().iter().flatten().map(|f| f.clamp(lo, hi).powi(2)).collect();
+        -(c.cost_weight * numpy_sum(&squares))
     }
 
     /// One Gymnasium step. The action goes to `ctrl` as given (MuJoCo clamps it to the
@@ -316,23 +325,34 @@ impl Env {
     }
 
     pub(crate) fn step_unchecked(&mut self, action: &[f64], obs: &mut [f64]) -> StepInfo {
-        let x_before = self.data.qpos()[0];
+        let x_before = self.forward_x();
         self.data.ctrl_mut().copy_from_slice(action);
         for _ in 0..self.spec.frame_skip {
             self.data.step();
         }
+        if self.spec.contact.is_some() {
+            self.data.rne_post_constraint();
+        }
         let x_position = self.data.qpos()[0];
-        let x_velocity = (x_position - x_before) / self.dt;
+        let x_velocity = (self.forward_x() - x_before) / self.dt;
         self.observe(obs);
         let healthy = self.is_healthy();
-        let ctrl_cost = self.spec.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
-        let survive = self.spec.health.map_or(0.0, |h| if healthy { h.reward } else { 0.0 });
-        let terms =
-            RewardTerms { reward_forward: self.spec.forward_reward_weight * x_velocity, reward_ctrl: -ctrl_cost, reward_survive: survive };
+        let squares: Vec<f64> = action.iter().map(|a| a * a).collect();
+        let ctrl_cost = self.spec.ctrl_cost_weight * numpy_sum(&squares);
+        let survive = self.spec.health.map_or(0.0, |h| if healthy { h.reward() } else { 0.0 });
+        let contact = self.contact_reward();
+        let terms = RewardTerms {
+            reward_forward: self.spec.forward_reward_weight * x_velocity,
+            reward_ctrl: -ctrl_cost,
+            reward_survive: survive,
+            reward_contact: contact,
+        };
         self.elapsed += 1;
+        // Same order of operations as Gymnasium: (forward + survive) - ctrl, and Ant's
+        // (forward + survive) - (ctrl + contact).
+        let cost = if self.spec.contact.is_some() { ctrl_cost - contact } else { ctrl_cost };
         StepInfo {
-            // Same order of operations as Gymnasium: (forward + survive) - ctrl.
-            reward: (terms.reward_forward + survive) - ctrl_cost,
+            reward: (terms.reward_forward + survive) - cost,
             terminated: !healthy,
             truncated: self.elapsed >= self.spec.max_episode_steps,
             terms,
@@ -351,6 +371,30 @@ impl Env {
     }
 }
 
+/// `np.sum` of a contiguous float64 array, bit for bit: numpy adds fewer than 8 numbers in
+/// order, up to 128 in 8 interleaved partial sums, and more by halving (pairwise summation).
+/// Ant's 8 actions and 84 contact forces take the second path.
+fn numpy_sum(x: &[f64]) -> f64 {
+    let n = x.len();
+    if n < 8 {
+        x.iter().fold(0.0, |s, v| s + v)
+    } else if n <= 128 {
+        let mut r = [x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]];
+        let whole = n - n % 8;
+        for chunk in x[8..whole].chunks_exact(8) {
+            for (acc, v) in r.iter_mut().zip(chunk) {
+                *acc += v;
+            }
+        }
+        let head = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
+        x[whole..].iter().fold(head, |s, v| s + v)
+    } else {
+        let half = n / 2;
+        let half = half - half % 8;
+        numpy_sum(&x[..half]) + numpy_sum(&x[half..])
+    }
+}
+
 fn shape(what: &str, expected: usize, got: usize, hint: &str) -> Result<()> {
     if expected == got { Ok(()) } else { Err(Error::Shape { what: what.into(), expected, got, hint: hint.into() }) }
 }
@@ -363,12 +407,31 @@ mod tests {
     fn ids_parse_and_unknown_names_list_the_known_ones() {
         assert_eq!("Hopper-v5".parse::<EnvId>().unwrap(), EnvId::Hopper);
         let err = "Hopper-v4".parse::<EnvId>().unwrap_err().to_string();
-        assert!(err.contains("HalfCheetah-v5, Hopper-v5, Walker2d-v5"), "{err}");
+        assert!(err.contains("HalfCheetah-v5, Hopper-v5, Walker2d-v5, Ant-v5"), "{err}");
+    }
+
+    #[test]
+    fn numpy_sum_orders_additions_as_numpy_does() {
+        // Values whose sum depends on the order of additions.
+        let x: Vec<f64> = (0..300).map(|i| if i % 3 == 0 { 1e16 } else { 1.0 + i as f64 * 1e-3 }).collect();
+        for n in [3, 8, 84, 300] {
+            let seq = x[..n].iter().fold(0.0, |s, v| s + v);
+            let got = numpy_sum(&x[..n]);
+            assert!((got - seq).abs() <= 1e-12 * seq.abs(), "{n}");
+        }
+        // np.sum([1e16, 1, 1, 1, 1, 1, 1, 1, 1]) == 1.0000000000000008e16 (pairwise), where
+        // adding in order gives 1e16.
+        let mut nine = vec![1.0; 9];
+        nine[0] = 1e16;
+        assert_eq!(numpy_sum(&nine), 1.0000000000000008e16);
+        assert_eq!(nine.iter().fold(0.0, |s, v| s + v), 1e16);
     }
 
     #[test]
     fn dimensions_match_gymnasium() {
-        for (id, obs, act, dt) in [(EnvId::HalfCheetah, 17, 6, 0.05), (EnvId::Hopper, 11, 3, 0.008), (EnvId::Walker2d, 17, 6, 0.008)] {
+        for (id, obs, act, dt) in
+            [(EnvId::HalfCheetah, 17, 6, 0.05), (EnvId::Hopper, 11, 3, 0.008), (EnvId::Walker2d, 17, 6, 0.008), (EnvId::Ant, 105, 8, 0.05)]
+        {
             let env = Env::new(id).unwrap();
             assert_eq!((env.obs_dim(), env.act_dim()), (obs, act), "{id}");
             assert!((env.dt() - dt).abs() < 1e-12, "{id}");

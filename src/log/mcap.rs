@@ -28,6 +28,10 @@ pub const FORMAT: &str = "idrex-rollout/1";
 const EPISODE_SCHEMA: &str = r#"{"type":"object","title":"idrex.Episode","properties":{"episode":{"type":"integer"},"source":{"type":"string"},"noise":{"type":"number"},"seed":{"type":"integer"},"group":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}}},"required":["episode","source","noise","seed","group","obs"]}"#;
 const STEP_SCHEMA: &str = r#"{"type":"object","title":"idrex.Step","properties":{"episode":{"type":"integer"},"t":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}},"action":{"type":"array","items":{"type":"number"}},"next_obs":{"type":"array","items":{"type":"number"}},"reward":{"type":"number"},"reward_forward":{"type":"number"},"reward_ctrl":{"type":"number"},"reward_survive":{"type":"number"},"learned_reward":{"type":"number"},"terminated":{"type":"boolean"},"truncated":{"type":"boolean"}},"required":["episode","t","obs","action","next_obs","reward","terminated","truncated"]}"#;
 
+/// The step schema of a task with a contact cost (Ant): `reward_contact` too. The other tasks
+/// keep the schema above, so their files' bytes are what they were.
+const STEP_SCHEMA_CONTACT: &str = r#"{"type":"object","title":"idrex.Step","properties":{"episode":{"type":"integer"},"t":{"type":"integer"},"obs":{"type":"array","items":{"type":"number"}},"action":{"type":"array","items":{"type":"number"}},"next_obs":{"type":"array","items":{"type":"number"}},"reward":{"type":"number"},"reward_forward":{"type":"number"},"reward_ctrl":{"type":"number"},"reward_survive":{"type":"number"},"reward_contact":{"type":"number"},"learned_reward":{"type":"number"},"terminated":{"type":"boolean"},"truncated":{"type":"boolean"}},"required":["episode","t","obs","action","next_obs","reward","terminated","truncated"]}"#;
+
 /// Per-step learned rewards, one vector per trajectory, where a reward model scored them.
 pub type LearnedRewards<'a> = Option<&'a [Vec<f64>]>;
 
@@ -47,7 +51,8 @@ fn write_to<W: Write + Seek>(
 ) -> std::result::Result<(), mcap::McapError> {
     let mut out = mcap::WriteOptions::new().profile("").library(concat!("idrex ", env!("CARGO_PKG_VERSION"))).create(w)?;
     let ep_schema = out.add_schema("idrex.Episode", "jsonschema", EPISODE_SCHEMA.as_bytes())?;
-    let step_schema = out.add_schema("idrex.Step", "jsonschema", STEP_SCHEMA.as_bytes())?;
+    let contact = env.parse::<crate::env::EnvId>().is_ok_and(|id| id.spec().contact.is_some());
+    let step_schema = out.add_schema("idrex.Step", "jsonschema", if contact { STEP_SCHEMA_CONTACT } else { STEP_SCHEMA }.as_bytes())?;
     let ep_chan = out.add_channel(ep_schema, "/episode", "json", &BTreeMap::new())?;
     let step_chan = out.add_channel(step_schema, "/step", "json", &BTreeMap::new())?;
     let dt_ns = (dt * 1e9).round() as u64;
@@ -74,6 +79,9 @@ fn write_to<W: Write + Seek>(
                 "reward_survive": terms.reward_survive,
                 "terminated": last && t.terminated, "truncated": last && t.truncated,
             });
+            if contact {
+                msg["reward_contact"] = json!(terms.reward_contact);
+            }
             // Absent rather than null: Foxglove's JSON-schema parser takes one type per field.
             if let Some(l) = learned {
                 msg["learned_reward"] = json!(l[e][s]);
@@ -225,6 +233,7 @@ pub fn parse(path: &Path, buf: &[u8]) -> Result<Rollouts> {
                     reward_forward: v["reward_forward"].as_f64().unwrap_or(0.0),
                     reward_ctrl: v["reward_ctrl"].as_f64().unwrap_or(0.0),
                     reward_survive: v["reward_survive"].as_f64().unwrap_or(0.0),
+                    reward_contact: v["reward_contact"].as_f64().unwrap_or(0.0),
                 });
                 t.terminated = v["terminated"].as_bool().unwrap_or(false);
                 t.truncated = v["truncated"].as_bool().unwrap_or(false);
@@ -258,7 +267,7 @@ mod tests {
             obs: (0..=len).flat_map(|t| [t as f32, -(t as f32)]).collect(),
             actions: (0..len).map(|t| t as f32 * 0.1).collect(),
             rewards: (0..len).map(|t| t as f64).collect(),
-            terms: vec![RewardTerms { reward_forward: 1.0, reward_ctrl: -0.5, reward_survive: 0.0 }; len],
+            terms: vec![RewardTerms { reward_forward: 1.0, reward_ctrl: -0.5, reward_survive: 0.0, reward_contact: 0.0 }; len],
             terminated: true,
             truncated: false,
             meta: TrajMeta { source: "bc".into(), noise, seed: 3, group: 1 },

@@ -120,14 +120,14 @@ pub struct Links {
 }
 
 /// Each evaluation's rollouts in a local store, labelled by its table cell (a bucket's
-/// objects are named by digest, so there is no file to link to).
-pub fn rollout_links(artifacts: &super::Artifacts, store: &crate::store::Store) -> Vec<(String, String)> {
+/// objects are named by digest, so there is no file to link to; an archived result has none
+/// on this machine).
+pub fn rollout_links(artifacts: &super::Artifacts, store: Option<&crate::store::Store>) -> Vec<(String, String)> {
     use crate::pipeline::stage::{Params, Typed};
-    if store.url().is_some() {
-        return Vec::new();
-    }
+    let Some(store) = store.filter(|s| s.url().is_none()) else { return Vec::new() };
     let mut out: Vec<(String, String)> = artifacts
         .iter()
+        .filter(|m| !artifacts.is_archived(&m.key))
         .filter_map(|m| {
             let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { return None };
             let file = m.outputs.iter().find(|o| o.path.ends_with(".mcap"))?;

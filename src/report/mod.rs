@@ -84,15 +84,33 @@ pub fn over_checkpoints(checkpoints: &[CheckpointEval]) -> f64 {
     spearman(&learned, &truth)
 }
 
-/// The store's intact artifacts, read and verified once: every table, note and figure of a
-/// report comes from this one pass (verifying re-hashes every output file).
+/// The store's intact artifacts, read and verified once, and any archives' manifests
+/// (`idrex export`): every table, note and figure of a report comes from this one pass
+/// (verifying re-hashes every output file).
+#[derive(Default)]
 pub struct Artifacts {
     by_key: BTreeMap<String, Manifest>,
+    /// Keys known from an archive alone: no outputs on this machine.
+    archived: std::collections::BTreeSet<String>,
 }
 
 impl Artifacts {
     pub fn read(store: &Store) -> Result<Self> {
-        Ok(Artifacts { by_key: store.manifests()?.into_iter().map(|m| (m.key.clone(), m)).collect() })
+        Ok(Artifacts { by_key: store.manifests()?.into_iter().map(|m| (m.key.clone(), m)).collect(), ..Default::default() })
+    }
+
+    /// Adds an archive's manifests; returns how many were not known yet.
+    pub fn add_archive(&mut self, path: &std::path::Path) -> Result<usize> {
+        let archived = crate::store::archive::read(path)?;
+        let before: std::collections::BTreeSet<String> = self.by_key.keys().cloned().collect();
+        let added = crate::store::archive::merge(&mut self.by_key, path, archived)?;
+        self.archived.extend(self.by_key.keys().filter(|k| !before.contains(*k)).cloned());
+        Ok(added)
+    }
+
+    /// Whether `key` is known from an archive only (its outputs are not on this machine).
+    pub fn is_archived(&self, key: &str) -> bool {
+        self.archived.contains(key)
     }
 
     pub fn iter(&self) -> impl Iterator<Item = &Manifest> {

@@ -77,7 +77,7 @@ fn store() -> Artifacts {
             add(manifest(&format!("drex{r}-{run}"), &Params::Eval(eval(Method::Drex, run)), &Metrics::Eval(x), &[("demos", &demos)]));
         }
     }
-    Artifacts { by_key }
+    Artifacts { by_key, ..Default::default() }
 }
 
 fn row<'a>(t: &'a Tables, pipeline: &str, method: &str, protocol: Protocol) -> &'a ProtocolRow {

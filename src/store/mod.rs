@@ -23,6 +23,7 @@
 //! directory laid out like a local store (inputs downloaded into it and checked, outputs
 //! published there first) and is then pushed, manifest last. The two differ only behind
 //! [`backend::Backend`]: the local directory and the bucket are its two implementations.
+pub mod archive;
 mod backend;
 mod remote;
 pub mod retry;
@@ -174,6 +175,15 @@ impl Store {
     /// when a blob is downloaded, and by [`Store::verify`].)
     pub fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
         self.backend.check(self, key)
+    }
+
+    /// An intact artifact's `manifest.json` as written (what [`archive`] keeps), checked; from
+    /// an S3 store, through its cache.
+    pub fn manifest_text(&self, key: &str) -> Result<String> {
+        let dir = self.input_dir(key)?;
+        self.local_check(key).map_err(|p| Error::Invalid(format!("artifact {key} in {}: {p}", self.location())))?;
+        let path = dir.join(MANIFEST);
+        std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))
     }
 
     /// Checks the local directory's copy of `key` against its manifest.

@@ -578,7 +578,7 @@ mod tests {
                 obs: (0..(len + 1) * 11).map(|i| i as f32 * 0.01).collect(),
                 actions: vec![0.1; len * 3],
                 rewards: vec![1.0; len],
-                terms: vec![RewardTerms { reward_forward: 0.5, reward_ctrl: -0.1, reward_survive: 0.6 }; len],
+                terms: vec![RewardTerms { reward_forward: 0.5, reward_ctrl: -0.1, reward_survive: 0.6, reward_contact: 0.0 }; len],
                 terminated: false,
                 truncated: true,
                 meta: TrajMeta { source: "demo".into(), noise: 0.0, seed, group: 0 },

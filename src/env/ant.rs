@@ -1,0 +1,29 @@
+//! Ant-v5: a quadruped rewarded for walking forward (+x) without flipping over.
+//!
+//! | | |
+//! |---|---|
+//! | model | `ant.xml` (timestep 0.01) |
+//! | action | 8 hip and ankle torques in [-1, 1] |
+//! | observation | 105 = qpos[2:] (torso z, orientation quaternion, 8 joint angles: 13) + qvel (14) + clip(cfrc_ext[1:], -1, 1) (13 bodies x 6: 78) |
+//! | reward | forward = dx/dt of the torso body (`xpos`); survive = 1 while healthy; ctrl = -0.5 * ‖a‖²; contact = -5e-4 * ‖clip(cfrc_ext, -1, 1)‖² |
+//! | termination | unhealthy: any qpos or qvel not finite, or torso z ∉ [0.2, 1.0] |
+//! | reset | qpos0 + U(-0.1, 0.1), qvel0 + 0.1 * N(0, 1) |
+//!
+//! Gymnasium's defaults throughout (`use_contact_forces` is gone in v5: the contact cost is
+//! always paid and the contact forces always observed).
+use super::{Contact, EnvSpec, Forward, Health, ResetNoise};
+
+pub const SPEC: EnvSpec = EnvSpec {
+    name: "Ant-v5",
+    xml_file: "ant.xml",
+    frame_skip: 5,
+    forward_reward_weight: 1.0,
+    ctrl_cost_weight: 0.5,
+    health: Some(Health::Upright { reward: 1.0, z_range: (0.2, 1.0) }),
+    obs_qvel_clip: None,
+    obs_skip_qpos: 2,
+    forward: Forward::BodyXpos(1),
+    contact: Some(Contact { cost_weight: 5e-4, force_range: (-1.0, 1.0) }),
+    reset_noise: ResetNoise::UniformGaussian(0.1),
+    max_episode_steps: 1000,
+};

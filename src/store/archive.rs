@@ -1,0 +1,164 @@
+//! A study's manifests without their outputs, as one NDJSON file (one manifest per line, in
+//! key order): what a report needs of a study (parameters, metrics, output digests), small
+//! enough to commit, so the report can be rebuilt on a machine that lost the store or never
+//! had it. A line's key is recomputed from its kind, version, parameters, seed and inputs,
+//! so an edited definition is refused; where a store holds the same key, both must name the
+//! same output digests (bytes depend on the key alone, so anything else is a defect).
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use super::{Manifest, key};
+use crate::error::{Error, Result};
+
+/// One archive line: a stored `manifest.json` with the whitespace outside its strings removed,
+/// so every number keeps the exact text the stage wrote (re-encoding a parsed manifest could
+/// move a float by an ulp).
+pub fn line(manifest_json: &str) -> String {
+    let (mut out, mut in_string, mut escaped) = (String::with_capacity(manifest_json.len()), false, false);
+    for c in manifest_json.chars() {
+        if in_string {
+            out.push(c);
+            match (escaped, c) {
+                (true, _) => escaped = false,
+                (false, '\\') => escaped = true,
+                (false, '"') => in_string = false,
+                _ => {}
+            }
+        } else if !c.is_whitespace() {
+            in_string = c == '"';
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Writes `(key, manifest.json text)` pairs to `path` in key order, replacing it only once
+/// the whole file is written.
+pub fn write(path: &Path, manifests: &BTreeMap<String, String>) -> Result<()> {
+    let text: String = manifests.values().map(|m| line(m) + "\n").collect();
+    let tmp = path.with_extension("ndjson.partial");
+    std::fs::write(&tmp, text).map_err(|e| Error::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+/// Reads an archive, checking each line's key against its definition.
+pub fn read(path: &Path) -> Result<Vec<Manifest>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let at = |why: String| Error::file(path, format!("line {}: {why}", i + 1));
+        let m: Manifest =
+            serde_json::from_str(line).map_err(|e| at(format!("not a manifest ({e}); write archives with `idrex export`")))?;
+        let expected = key(&m.kind, m.version, &m.params, m.seed, &m.inputs);
+        if expected != m.key {
+            return Err(at(format!(
+                "key {} does not match its definition (which hashes to {}): the line was edited; restore it from git",
+                short(&m.key),
+                short(&expected)
+            )));
+        }
+        out.push(m);
+    }
+    Ok(out)
+}
+
+/// Adds the archives' manifests to `by_key` (the store's), refusing two manifests of one key
+/// whose outputs differ.
+pub fn merge(by_key: &mut BTreeMap<String, Manifest>, path: &Path, archived: Vec<Manifest>) -> Result<usize> {
+    let mut added = 0;
+    for m in archived {
+        match by_key.get(&m.key) {
+            Some(have) if have.outputs != m.outputs => {
+                return Err(Error::file(
+                    path,
+                    format!(
+                        "artifact {} ({}) has other output digests here than in the store or an earlier archive: \
+                         the same key computed different bytes; `idrex verify --recompute` it",
+                        short(&m.key),
+                        m.node
+                    ),
+                ));
+            }
+            Some(_) => {}
+            None => {
+                by_key.insert(m.key.clone(), m);
+                added += 1;
+            }
+        }
+    }
+    Ok(added)
+}
+
+fn short(key: &str) -> &str {
+    &key[..key.len().min(12)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::OutputFile;
+
+    fn manifest(seed: u64, digest: &str) -> Manifest {
+        let params = serde_json::json!({"env": "Hopper-v5"});
+        let inputs = BTreeMap::new();
+        Manifest {
+            key: key("eval", 1, &params, seed, &inputs),
+            kind: "eval".into(),
+            version: 1,
+            node: format!("eval-{seed}"),
+            params,
+            seed,
+            inputs,
+            outputs: vec![OutputFile { path: "rollouts.mcap".into(), sha256: digest.into(), size: 3 }],
+            metrics: serde_json::json!({"summary": {"returns": [1.5]}}),
+            started_unix: 0.0,
+            ended_unix: 1.0,
+            wall_s: 1.0,
+            idrex_version: "test".into(),
+            kernel: None,
+            test_set: None,
+        }
+    }
+
+    #[test]
+    fn an_archive_reads_back_what_was_written_in_key_order() {
+        let dir = std::env::temp_dir().join(format!("idrex-archive-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.ndjson");
+        let (a, b) = (manifest(1, "aa"), manifest(2, "bb"));
+        let texts = [&b, &a].map(|m| (m.key.clone(), serde_json::to_string_pretty(m).unwrap())).into_iter().collect();
+        write(&path, &texts).unwrap();
+        let back = read(&path).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap().lines().count(), 2);
+        let mut expected = vec![a, b];
+        expected.sort_by(|x, y| x.key.cmp(&y.key));
+        assert_eq!(back, expected);
+        assert!(!path.with_extension("ndjson.partial").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_line_keeps_strings_and_numbers_as_written() {
+        let text = "{\n  \"node\": \"a b\\\" c\",\n  \"x\": 0.30000000000000004\n}";
+        assert_eq!(line(text), "{\"node\":\"a b\\\" c\",\"x\":0.30000000000000004}");
+    }
+
+    #[test]
+    fn an_edited_definition_and_differing_bytes_are_refused() {
+        let dir = std::env::temp_dir().join(format!("idrex-archive-edit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.ndjson");
+        let m = manifest(1, "aa");
+        write(&path, &BTreeMap::from([(m.key.clone(), serde_json::to_string_pretty(&m).unwrap())])).unwrap();
+        let edited = std::fs::read_to_string(&path).unwrap().replace("\"seed\":1", "\"seed\":7");
+        std::fs::write(&path, edited).unwrap();
+        let err = read(&path).unwrap_err().to_string();
+        assert!(err.contains("line 1") && err.contains("does not match its definition"), "{err}");
+
+        let mut by_key = BTreeMap::from([(m.key.clone(), m.clone())]);
+        assert_eq!(merge(&mut by_key, &path, vec![m.clone(), manifest(2, "bb")]).unwrap(), 1);
+        let err = merge(&mut by_key, &path, vec![manifest(1, "cc")]).unwrap_err().to_string();
+        assert!(err.contains("other output digests"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
