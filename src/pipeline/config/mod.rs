@@ -177,7 +177,8 @@ impl Default for EvalConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct RewardSettings {
     /// Control-cost coefficient subtracted from the learned reward (default per environment:
-    /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d).
+    /// 0.1 HalfCheetah, 0.001 Hopper and Walker2d, 0.5 Ant: D-REX's rule, each task's
+    /// own control-cost weight; the original D-REX code sets none for Ant).
     pub ctrl_coeff: Option<f64>,
     /// mean, last-over-count (the original code), or min (pessimistic).
     pub combine: Combine,
