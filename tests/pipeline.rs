@@ -739,3 +739,28 @@ print(steps)
     let args: Vec<&str> = mcaps.iter().map(String::as_str).collect();
     assert!(py(fields, &args).trim().parse::<usize>().unwrap() > 100);
 }
+
+/// The locked test set's committed archives rebuild its newest committed report with no
+/// store: every replicate's returns, to every printed digit.
+#[test]
+fn the_committed_archives_rebuild_the_locked_report() {
+    let dir = TempDir::new("archives");
+    let reports = repo("analysis/results/locked/report");
+    let mut archived: Vec<std::path::PathBuf> =
+        std::fs::read_dir(&reports).unwrap().flatten().map(|e| e.path().join("manifests.ndjson")).filter(|p| p.is_file()).collect();
+    archived.sort();
+    assert!(archived.len() >= 2, "{archived:?}");
+    let newest = archived.last().unwrap().parent().unwrap().to_path_buf();
+    let mut args = vec!["report".to_string(), "--store".into(), dir.join("none").display().to_string()];
+    for a in &archived {
+        args.extend(["--archive".to_string(), a.display().to_string()]);
+    }
+    args.extend(["--out".to_string(), dir.join("out").display().to_string(), "--format".into(), "csv".into()]);
+    let out = idrex(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(out.status.success(), "{}", stderr(&out));
+    for table in ["returns.csv", "protocols.csv"] {
+        let (ours, committed) =
+            (std::fs::read_to_string(dir.join("out").join(table)).unwrap(), std::fs::read_to_string(newest.join(table)).unwrap());
+        assert!(ours == committed, "{table} from the archives differs from {}", newest.display());
+    }
+}

@@ -101,7 +101,18 @@ impl Artifacts {
 
     /// Adds an archive's manifests; returns how many were not known yet.
     pub fn add_archive(&mut self, path: &std::path::Path) -> Result<usize> {
-        let archived = crate::store::archive::read(path)?;
+        let archived = crate::store::archive::read(path, |m, text| {
+            let kind = crate::pipeline::stage::StageKind::parse(&m.kind)
+                .ok_or_else(|| Error::Invalid(format!("unknown stage kind '{}'", m.kind)))?;
+            // Most kinds key on every parameter, hashed from the text as written; the rest
+            // (an import keys on its file's digest, not its path) on what their kind says.
+            let keyed = Params::from_json(kind, &m.params)?.key_json();
+            Ok(if keyed == m.params {
+                crate::store::key_of_text(&m.kind, m.version, text, m.seed, &m.inputs)
+            } else {
+                crate::store::key(&m.kind, m.version, &keyed, m.seed, &m.inputs)
+            })
+        })?;
         let before: std::collections::BTreeSet<String> = self.by_key.keys().cloned().collect();
         let added = crate::store::archive::merge(&mut self.by_key, path, archived)?;
         self.archived.extend(self.by_key.keys().filter(|k| !before.contains(*k)).cloned());

@@ -1,13 +1,14 @@
 //! A study's manifests without their outputs, as one NDJSON file (one manifest per line, in
 //! key order): what a report needs of a study (parameters, metrics, output digests), small
 //! enough to commit, so the report can be rebuilt on a machine that lost the store or never
-//! had it. A line's key is recomputed from its kind, version, parameters, seed and inputs,
-//! so an edited definition is refused; where a store holds the same key, both must name the
+//! had it. A line's key is recomputed from its kind, version, parameters, seed and inputs
+//! (by the caller's `key_of`: which parameters enter a key is the stage kind's to say), so an
+//! edited definition is refused; where a store holds the same key, both must name the
 //! same output digests (bytes depend on the key alone, so anything else is a defect).
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use super::{Manifest, key};
+use super::Manifest;
 use crate::error::{Error, Result};
 
 /// One archive line: a stored `manifest.json` with the whitespace outside its strings removed,
@@ -41,15 +42,52 @@ pub fn write(path: &Path, manifests: &BTreeMap<String, String>) -> Result<()> {
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
 }
 
-/// Reads an archive, checking each line's key against its definition.
-pub fn read(path: &Path) -> Result<Vec<Manifest>> {
+/// The text of a top-level field of a compact JSON object (an archive line).
+fn field<'a>(line: &'a str, name: &str) -> Option<&'a str> {
+    let (mut depth, mut in_string, mut escaped, mut start) = (0usize, false, false, None);
+    let tag = format!("\"{name}\":");
+    for (i, c) in line.char_indices() {
+        if in_string {
+            match (escaped, c) {
+                (true, _) => escaped = false,
+                (false, '\\') => escaped = true,
+                (false, '"') => in_string = false,
+                _ => {}
+            }
+            continue;
+        }
+        match c {
+            '"' => {
+                if depth == 1 && start.is_none() && line[i..].starts_with(&tag) {
+                    start = Some(i + tag.len());
+                }
+                in_string = true;
+            }
+            '{' | '[' => depth += 1,
+            '}' | ']' => {
+                if depth == 2 && start.is_some() && line[start?..].starts_with(['{', '[']) {
+                    return Some(&line[start?..=i]);
+                }
+                depth -= 1;
+            }
+            ',' if depth == 1 && start.is_some() => return Some(&line[start?..i]),
+            _ => {}
+        }
+    }
+    None
+}
+
+/// Reads an archive, checking each line's key against `key_of(manifest, its parameters'
+/// text as written)`.
+pub fn read(path: &Path, key_of: impl Fn(&Manifest, &str) -> Result<String>) -> Result<Vec<Manifest>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let at = |why: String| Error::file(path, format!("line {}: {why}", i + 1));
         let m: Manifest =
             serde_json::from_str(line).map_err(|e| at(format!("not a manifest ({e}); write archives with `idrex export`")))?;
-        let expected = key(&m.kind, m.version, &m.params, m.seed, &m.inputs);
+        let params = field(line, "params").ok_or_else(|| at("no params".into()))?;
+        let expected = key_of(&m, params).map_err(|e| at(format!("artifact {}: {e}", short(&m.key))))?;
         if expected != m.key {
             return Err(at(format!(
                 "key {} does not match its definition (which hashes to {}): the line was edited; restore it from git",
@@ -96,7 +134,24 @@ fn short(key: &str) -> &str {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::OutputFile;
+    use crate::store::{OutputFile, key};
+
+    fn key_of(m: &Manifest, params: &str) -> Result<String> {
+        assert_eq!(
+            key(&m.kind, m.version, &m.params, m.seed, &m.inputs),
+            crate::store::key_of_text(&m.kind, m.version, params, m.seed, &m.inputs)
+        );
+        Ok(key(&m.kind, m.version, &m.params, m.seed, &m.inputs))
+    }
+
+    #[test]
+    fn a_field_is_found_at_the_top_level_only() {
+        let line = r#"{"a":{"params":1},"params":{"x":[0.1,{"y":"}"}]},"seed":3,"z":[1]}"#;
+        assert_eq!(field(line, "params"), Some(r#"{"x":[0.1,{"y":"}"}]}"#));
+        assert_eq!(field(line, "seed"), Some("3"));
+        assert_eq!(field(line, "z"), Some("[1]"));
+        assert_eq!(field(line, "none"), None);
+    }
 
     fn manifest(seed: u64, digest: &str) -> Manifest {
         let params = serde_json::json!({"env": "Hopper-v5"});
@@ -128,7 +183,7 @@ mod tests {
         let (a, b) = (manifest(1, "aa"), manifest(2, "bb"));
         let texts = [&b, &a].map(|m| (m.key.clone(), serde_json::to_string_pretty(m).unwrap())).into_iter().collect();
         write(&path, &texts).unwrap();
-        let back = read(&path).unwrap();
+        let back = read(&path, key_of).unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap().lines().count(), 2);
         let mut expected = vec![a, b];
         expected.sort_by(|x, y| x.key.cmp(&y.key));
@@ -152,7 +207,7 @@ mod tests {
         write(&path, &BTreeMap::from([(m.key.clone(), serde_json::to_string_pretty(&m).unwrap())])).unwrap();
         let edited = std::fs::read_to_string(&path).unwrap().replace("\"seed\":1", "\"seed\":7");
         std::fs::write(&path, edited).unwrap();
-        let err = read(&path).unwrap_err().to_string();
+        let err = read(&path, key_of).unwrap_err().to_string();
         assert!(err.contains("line 1") && err.contains("does not match its definition"), "{err}");
 
         let mut by_key = BTreeMap::from([(m.key.clone(), m.clone())]);

@@ -63,10 +63,19 @@ pub fn key(kind: &str, version: u32, params: &serde_json::Value, seed: u64, inpu
     // key_format 2: parameters became typed structs (some gained fields, the PPO curve
     // changed columns), so every key changed once. key_format 3: rollout MCAP files omit an
     // absent learned reward instead of writing null, so their bytes changed.
-    let canonical = serde_json::json!({
-        "key_format": 3, "kind": kind, "version": version, "params": params, "seed": seed, "inputs": inputs,
-    });
-    hex(&Sha256::digest(canonical.to_string().as_bytes()))
+    key_of_text(kind, version, &params.to_string(), seed, inputs)
+}
+
+/// [`key`] with the parameters given as their compact JSON text: an archive's line keeps
+/// that text as written, which parsing could move by an ulp.
+pub fn key_of_text(kind: &str, version: u32, params: &str, seed: u64, inputs: &BTreeMap<String, String>) -> String {
+    // The object `json!` would build, keys in sorted order.
+    let canonical = format!(
+        "{{\"inputs\":{},\"key_format\":3,\"kind\":{},\"params\":{params},\"seed\":{seed},\"version\":{version}}}",
+        serde_json::to_string(inputs).expect("a map of strings encodes"),
+        serde_json::Value::from(kind),
+    );
+    hex(&Sha256::digest(canonical.as_bytes()))
 }
 
 pub(crate) fn hex(bytes: &[u8]) -> String {

@@ -46,7 +46,7 @@ mod manifest;
 pub use claims::NodeDef;
 pub use location::Location;
 pub use locks::{KeyLock, UseLock};
-pub use manifest::{MANIFEST, Manifest, OutputFile, TestSetMark, hash_outputs, key, now_unix, sha256_file};
+pub use manifest::{MANIFEST, Manifest, OutputFile, TestSetMark, hash_outputs, key, key_of_text, now_unix, sha256_file};
 #[derive(Debug, Clone)]
 pub struct Store {
     /// The store's directory; for an S3 store, the local cache it stages and reads through.
