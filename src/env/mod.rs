@@ -313,8 +313,7 @@ impl Env {
     fn contact_reward(&self) -> f64 {
         let Some(c) = self.spec.contact else { return 0.0 };
         let (lo, hi) = c.force_range;
-        let squares: Vec<f64> = self.data.cfrc_ext().iter().flatten().map(|f| f.clamp(lo, hi).powi(2)).collect();
-        -(c.cost_weight * numpy_sum(&squares))
+        -(c.cost_weight * sum_of_squares(self.data.cfrc_ext().iter().flatten().map(|f| f.clamp(lo, hi))))
     }
 
     /// One Gymnasium step. The action goes to `ctrl` as given (MuJoCo clamps it to the
@@ -337,8 +336,7 @@ impl Env {
         let x_velocity = (self.forward_x() - x_before) / self.dt;
         self.observe(obs);
         let healthy = self.is_healthy();
-        let squares: Vec<f64> = action.iter().map(|a| a * a).collect();
-        let ctrl_cost = self.spec.ctrl_cost_weight * numpy_sum(&squares);
+        let ctrl_cost = self.spec.ctrl_cost_weight * sum_of_squares(action.iter().copied());
         let survive = self.spec.health.map_or(0.0, |h| if healthy { h.reward() } else { 0.0 });
         let contact = self.contact_reward();
         let terms = RewardTerms {
@@ -369,6 +367,19 @@ impl Env {
             self.data.step();
         }
     }
+}
+
+/// `np.sum(np.square(x))`, in a buffer on the stack (a step's actions and contact forces fit:
+/// this runs on every step).
+fn sum_of_squares(x: impl Iterator<Item = f64>) -> f64 {
+    let mut buf = [0.0f64; 128];
+    let mut n = 0;
+    for v in x {
+        assert!(n < buf.len(), "more than 128 values in one step's sum");
+        buf[n] = v * v;
+        n += 1;
+    }
+    numpy_sum(&buf[..n])
 }
 
 /// `np.sum` of a contiguous float64 array, bit for bit: numpy adds fewer than 8 numbers in
