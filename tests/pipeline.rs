@@ -740,27 +740,87 @@ print(steps)
     assert!(py(fields, &args).trim().parse::<usize>().unwrap() > 100);
 }
 
-/// The locked test set's committed archives rebuild its newest committed report with no
-/// store: every replicate's returns, to every printed digit.
+/// The locked test set's committed archives (`report/r<R>/manifests.ndjson`, replicate R's
+/// stages) rebuild, with no store, every row that any committed report printed for an
+/// archived replicate, to every digit: the reports written as replicates landed and the
+/// archives recomputed on another machine or processor must agree.
 #[test]
-fn the_committed_archives_rebuild_the_locked_report() {
+fn the_committed_archives_rebuild_the_locked_reports() {
     let dir = TempDir::new("archives");
     let reports = repo("analysis/results/locked/report");
-    let mut archived: Vec<std::path::PathBuf> =
-        std::fs::read_dir(&reports).unwrap().flatten().map(|e| e.path().join("manifests.ndjson")).filter(|p| p.is_file()).collect();
-    archived.sort();
+    let mut dirs: Vec<std::path::PathBuf> = std::fs::read_dir(&reports).unwrap().flatten().map(|e| e.path()).collect();
+    dirs.sort();
+    let archived: Vec<(usize, std::path::PathBuf)> = dirs
+        .iter()
+        .filter(|d| d.join("manifests.ndjson").is_file())
+        .map(|d| (d.file_name().unwrap().to_str().unwrap()[1..].parse().unwrap(), d.join("manifests.ndjson")))
+        .collect();
     assert!(archived.len() >= 2, "{archived:?}");
-    let newest = archived.last().unwrap().parent().unwrap().to_path_buf();
     let mut args = vec!["report".to_string(), "--store".into(), dir.join("none").display().to_string()];
-    for a in &archived {
+    for (_, a) in &archived {
         args.extend(["--archive".to_string(), a.display().to_string()]);
     }
     args.extend(["--out".to_string(), dir.join("out").display().to_string(), "--format".into(), "csv".into()]);
     let out = idrex(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(out.status.success(), "{}", stderr(&out));
+    // A row's table is its second column: `locked-test` for replicate 0, `locked-test/rR` after.
+    let replicate = |line: &str| -> Option<usize> {
+        let table = line.split(',').nth(1)?;
+        match table.strip_prefix("locked-test") {
+            Some("") => Some(0),
+            Some(r) => r.strip_prefix("/r")?.parse().ok(),
+            None => None,
+        }
+    };
     for table in ["returns.csv", "protocols.csv"] {
-        let (ours, committed) =
-            (std::fs::read_to_string(dir.join("out").join(table)).unwrap(), std::fs::read_to_string(newest.join(table)).unwrap());
-        assert!(ours == committed, "{table} from the archives differs from {}", newest.display());
+        let ours = std::fs::read_to_string(dir.join("out").join(table)).unwrap();
+        let ours: std::collections::BTreeSet<&str> = ours.lines().collect();
+        let mut checked = std::collections::BTreeMap::new();
+        for d in &dirs {
+            let Ok(committed) = std::fs::read_to_string(d.join(table)) else { continue };
+            for line in committed.lines().skip(1) {
+                let Some(r) = replicate(line).filter(|r| archived.iter().any(|(a, _)| a == r)) else { continue };
+                assert!(ours.contains(line), "{table} of {}: replicate {r}'s row is not what its archive gives:\n{line}", d.display());
+                *checked.entry(r).or_insert(0) += 1;
+            }
+        }
+        for (r, _) in &archived {
+            assert!(checked.get(r).copied().unwrap_or(0) > 0, "no committed {table} row of replicate {r}");
+        }
     }
+}
+
+/// On a machine whose store never held the locked test set, its committed archives still lock
+/// its seeds: another configuration on them is refused before any stage runs.
+#[test]
+fn a_committed_archive_locks_the_test_seeds_on_an_empty_store() {
+    let dir = TempDir::new("archive-lock");
+    let locked = repo("analysis/results/locked");
+    let demos = repo("../shared/data/drex-demos");
+    // The locked file with another ceiling: the same seeds, another learned reward.
+    let text = std::fs::read_to_string(locked.join("test.yaml"))
+        .unwrap()
+        .replace("name: locked-test", "name: another-look")
+        .replace("role: test", "role: study")
+        .replace("ceiling: 0.75", "ceiling: 0.5")
+        .replace("../../../../shared/data/drex-demos", demos.to_str().unwrap());
+    let file = dir.join("another.yaml");
+    std::fs::write(&file, text).unwrap();
+    let archive = locked.join("report/r6/manifests.ndjson");
+    let store = dir.join("store");
+    let args = ["pipeline", "run", file.to_str().unwrap(), "--only-replicate", "6", "--store", store.to_str().unwrap()];
+    let out = idrex(&[&args[..], &["--archive", archive.to_str().unwrap()]].concat());
+    assert!(!out.status.success(), "{}", stdout(&out));
+    let err = stderr(&out);
+    assert!(err.contains("another.yaml") && err.contains("locked test set `locked-test`") && err.contains("--reuse-test-set"), "{err}");
+    fn manifests(d: &Path) -> usize {
+        std::fs::read_dir(d)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .map(|e| e.path())
+            .map(|p| if p.is_dir() { manifests(&p) } else { (p.file_name().unwrap() == "manifest.json") as usize })
+            .sum()
+    }
+    assert_eq!(manifests(&store), 0, "nothing ran");
 }

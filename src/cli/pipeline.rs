@@ -76,6 +76,11 @@ pub struct RunArgs {
     /// these results as exploratory.
     #[arg(long)]
     pub reuse_test_set: bool,
+    /// An archive of manifests (`idrex export`) whose evaluations count, beside the store's,
+    /// as looks at their seeds (repeatable): a test set committed as archives stays locked on
+    /// a machine whose store never held it.
+    #[arg(long, value_name = "FILE")]
+    pub archive: Vec<PathBuf>,
     /// Where the Rerun recording goes (default: recordings/<pipeline>-<env>.rrd).
     #[arg(long)]
     pub recording: Option<PathBuf>,
@@ -341,7 +346,11 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let g = expand(&p)?;
     let manifests = store.unverified_manifests()?;
     let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
-    let looks = crate::pipeline::test_set::Looks::new(&manifests);
+    let mut seen = manifests.clone();
+    for a in &args.archive {
+        seen.extend(crate::store::archive::read(a, stage::recorded_key)?.into_iter().filter(|m| !present.contains(m.key.as_str())));
+    }
+    let looks = crate::pipeline::test_set::Looks::new(&seen);
     let test_set = crate::pipeline::test_set::check(&p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
         if test_set.is_some() {

@@ -7,8 +7,9 @@
 //! replicates (then runs), and its comparisons count replicates, with a sign test.
 use std::collections::BTreeMap;
 
+use super::improvement::improvement_cell;
 use super::looks::LookRow;
-use super::studies::AggregateRow;
+use super::studies::{Against, AggregateRow, ImprovementRow, find};
 use super::{Protocol, ProtocolRow, num};
 use crate::pipeline::Method;
 use crate::stats::{WinCount, mean, sign_test_p};
@@ -90,6 +91,7 @@ fn capitalise(s: &str) -> String {
 pub fn markdown(
     protocols: &[ProtocolRow],
     aggregate: &[AggregateRow],
+    improvement: &[ImprovementRow],
     demos: &BTreeMap<(String, String), Vec<f64>>,
     looks: &[LookRow],
 ) -> String {
@@ -164,8 +166,11 @@ pub fn markdown(
         out.push_str(&format!(
             "### {env}, {study} ({n} replicates){}\n\nFinal policy, ground-truth return: the mean over replicates of each replicate's mean \
              over its runs, with a 95 % interval that resamples replicates and then runs. BC {}. \"k of n\" counts replicates; p is the \
-             one-sided sign test, and \"rate ≥\" the 95 % Clopper-Pearson lower bound on the rate.\n\n\
-             | method | return [95 % CI] | above BC | above the demonstrations' average |\n|---|---|---|---|\n",
+             one-sided sign test, and \"rate ≥\" the 95 % Clopper-Pearson lower bound on the rate. Against another method: \
+             rliable's probability of improvement P with its independent-bootstrap interval, then the replicates where the \
+             method scored above (paired by replicate) with the exact interval of that rate and the sign test's p.\n\n\
+             | method | return [95 % CI] | against BC | against D-REX | against K - 1 | above the demonstrations' average |\n\
+             |---|---|---|---|---|---|\n",
             caveat(env, study),
             num(Some(bc.mean))
         ));
@@ -175,12 +180,16 @@ pub fn markdown(
             let paired: Vec<bool> = r.scores.iter().filter_map(|(rep, s)| bc_of.get(rep).map(|b| s > b)).collect();
             let over_bc = WinCount { k: paired.iter().filter(|&&w| w).count(), n: paired.len() };
             let over_demos = r.above_demos_avg;
+            let against = |a: Against| find(improvement, r, a).map_or("-".to_string(), |i| improvement_cell(&i.improvement));
+            let over_bc_cell = find(improvement, r, Against::Bc).map_or(over_bc.to_string(), |i| improvement_cell(&i.improvement));
             out.push_str(&format!(
-                "| {} | {} [{}, {}] | {over_bc} | {over_demos} |\n",
+                "| {} | {} [{}, {}] | {over_bc_cell} | {} | {} | {over_demos} |\n",
                 display(&r.method),
                 num(Some(r.mean)),
                 num(Some(r.mean_ci.0)),
                 num(Some(r.mean_ci.1)),
+                against(Against::Drex),
+                against(Against::PreviousIteration),
             ));
             let name = display(&r.method);
             if over_bc.k == over_bc.n && over_demos.k == over_demos.n && r.mean_ci.0 > bc.mean {
@@ -238,7 +247,7 @@ mod tests {
             row("idrex-action-noise", 50.0, (0.0, 90.0), 3),
         ];
         let demos = BTreeMap::from([(("Hopper-v5".to_string(), "p".to_string()), vec![140.0, 160.0])]);
-        let md = markdown(&rows, &[], &demos, &[]);
+        let md = markdown(&rows, &[], &[], &demos, &[]);
         assert!(md.starts_with("## The answer\n\n### Hopper-v5, p\n"), "{md}");
         assert!(md.contains("BC 100.0; the demonstrations 150.0 (average)"), "{md}");
         assert!(md.contains("| D-REX | 300.0 [250.0, 350.0] | +200.0, interval above | +150.0, interval above |"), "{md}");
@@ -252,7 +261,7 @@ mod tests {
         );
         assert!(md.contains("iD-REX action noise is not above both. These are 3 RL runs on one seed set"), "{md}");
         // Without BC or the demonstrations there is nothing to answer against.
-        assert_eq!(markdown(&rows[1..], &[], &demos, &[]), "");
-        assert_eq!(markdown(&rows, &[], &BTreeMap::new(), &[]), "");
+        assert_eq!(markdown(&rows[1..], &[], &[], &demos, &[]), "");
+        assert_eq!(markdown(&rows, &[], &[], &BTreeMap::new(), &[]), "");
     }
 }

@@ -48,6 +48,15 @@ pub fn method_label(method: Method, iteration: usize) -> String {
     if iteration > 2 { format!("{} (k={iteration})", method.name()) } else { method.name().to_string() }
 }
 
+/// The label of the iteration before `label`'s, where that is a separate row: K - 1 for an
+/// iterated method at K > 2 (at K = 2 the iteration before is D-REX, compared already).
+pub fn previous_iteration(label: &str) -> Option<String> {
+    let (name, k) = label.strip_suffix(')')?.split_once(" (k=")?;
+    let method = Method::ALL.into_iter().find(|m| m.name() == name)?;
+    let k: usize = k.parse().ok().filter(|&k| k > 2)?;
+    Some(method_label(method, k - 1))
+}
+
 /// A table of the report: one pipeline's runs, or one replicate's of a study.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
 struct TableId {
@@ -101,18 +110,7 @@ impl Artifacts {
 
     /// Adds an archive's manifests; returns how many were not known yet.
     pub fn add_archive(&mut self, path: &std::path::Path) -> Result<usize> {
-        let archived = crate::store::archive::read(path, |m, text| {
-            let kind = crate::pipeline::stage::StageKind::parse(&m.kind)
-                .ok_or_else(|| Error::Invalid(format!("unknown stage kind '{}'", m.kind)))?;
-            // Most kinds key on every parameter, hashed from the text as written; the rest
-            // (an import keys on its file's digest, not its path) on what their kind says.
-            let keyed = Params::from_json(kind, &m.params)?.key_json();
-            Ok(if keyed == m.params {
-                crate::store::key_of_text(&m.kind, m.version, text, m.seed, &m.inputs)
-            } else {
-                crate::store::key(&m.kind, m.version, &keyed, m.seed, &m.inputs)
-            })
-        })?;
+        let archived = crate::store::archive::read(path, crate::pipeline::stage::recorded_key)?;
         let before: std::collections::BTreeSet<String> = self.by_key.keys().cloned().collect();
         let added = crate::store::archive::merge(&mut self.by_key, path, archived)?;
         self.archived.extend(self.by_key.keys().filter(|k| !before.contains(*k)).cloned());

@@ -36,6 +36,15 @@ pub struct AggregateRow {
     pub scores: Vec<(usize, f64)>,
 }
 
+/// What a method is compared against in its study.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Against {
+    Drex,
+    Bc,
+    /// The same method one iteration earlier (K - 1, for K > 2).
+    PreviousIteration,
+}
+
 /// P(method beats baseline) over one study's replicates.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImprovementRow {
@@ -43,6 +52,8 @@ pub struct ImprovementRow {
     pub study: String,
     pub protocol: Protocol,
     pub method: String,
+    pub against: Against,
+    /// The baseline's label (`drex`, `bc`, `idrex-multi-bc` for the K = 3 row's K = 2).
     pub baseline: String,
     /// Over the replicates where both were evaluated.
     pub improvement: Improvement,
@@ -99,7 +110,9 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
     }
     let mut improvement = Vec::new();
     for a in &out {
-        for baseline in [Method::Drex.name(), Method::Bc.name()] {
+        let previous = super::previous_iteration(&a.method).map(|p| (Against::PreviousIteration, p));
+        let baselines = [(Against::Drex, Method::Drex.name().to_string()), (Against::Bc, Method::Bc.name().to_string())];
+        for (against, baseline) in baselines.into_iter().chain(previous) {
             if a.method == baseline {
                 continue;
             }
@@ -113,12 +126,20 @@ pub fn aggregate(rows: &[ProtocolRow], demos: &BTreeMap<(String, String), Vec<f6
                 study: a.study.clone(),
                 protocol: a.protocol,
                 method: a.method.clone(),
-                baseline: baseline.into(),
+                against,
+                baseline,
                 improvement: Improvement::of(&pairs, RESAMPLES, 2),
             });
         }
     }
     (out, improvement)
+}
+
+/// `row`'s comparison against `against`, where its study has one.
+pub(super) fn find<'a>(improvement: &'a [ImprovementRow], row: &AggregateRow, against: Against) -> Option<&'a ImprovementRow> {
+    improvement
+        .iter()
+        .find(|i| i.env == row.env && i.study == row.study && i.protocol == row.protocol && i.method == row.method && i.against == against)
 }
 
 /// The two rows' scores on the replicates both have, replicate by replicate.
@@ -224,14 +245,12 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
             "above demos best",
             "against D-REX",
             "against BC",
+            "against K - 1",
         ];
         let mut table = Table { columns: columns.map(String::from).to_vec(), rows: vec![] };
         for r in rows.iter().filter(|r| r.env == env && r.study == study && r.protocol == protocol) {
-            let p = |baseline: &str| {
-                improvement
-                    .iter()
-                    .find(|i| i.env == env && i.study == study && i.protocol == protocol && i.method == r.method && i.baseline == baseline)
-                    .map_or("-".to_string(), |i| super::improvement::improvement_cell(&i.improvement))
+            let p = |against: Against| {
+                find(improvement, r, against).map_or("-".to_string(), |i| super::improvement::improvement_cell(&i.improvement))
             };
             let ci = |v: f64, (lo, hi): (f64, f64)| format!("{} [{}, {}]", num(Some(v)), num(Some(lo)), num(Some(hi)));
             table.rows.push(
@@ -243,8 +262,9 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
                     num(Some(r.median)),
                     r.above_demos_avg.to_string(),
                     r.above_demos_best.to_string(),
-                    p(Method::Drex.name()),
-                    p(Method::Bc.name()),
+                    p(Against::Drex),
+                    p(Against::Bc),
+                    p(Against::PreviousIteration),
                 ]
                 .map(Cell::Text)
                 .to_vec(),
@@ -253,6 +273,7 @@ pub fn markdown(rows: &[AggregateRow], improvement: &[ImprovementRow]) -> String
         out.push_str(&table.markdown());
     }
     out.push_str(super::improvement::LEGEND);
+    out.push_str("\"Against K - 1\": an iterated method against itself one iteration earlier, on the same replicates.\n\n");
     out
 }
 
@@ -312,5 +333,27 @@ pub(super) mod tests {
         assert!(md.contains("| drex | 4 (8) | 5.5 [") && md.contains("study `s`"), "{md}");
         let csv = Table::of(&agg).csv();
         assert_eq!(csv.lines().count(), 3, "a header and two rows: {csv}");
+    }
+
+    /// K = 3 is compared with K = 2 on the same replicates; K = 2's iteration before is
+    /// D-REX, compared already.
+    #[test]
+    fn an_iteration_past_two_is_compared_with_the_one_before() {
+        let mut rows = Vec::new();
+        for (r, k2, k3) in [(0, 1.0, 2.0), (1, 5.0, 3.0), (2, 4.0, 6.0)] {
+            rows.push(row("s", r, "drex", &[0.0]));
+            rows.push(row("s", r, "idrex-multi-bc", &[k2]));
+            rows.push(row("s", r, "idrex-multi-bc (k=3)", &[k3]));
+        }
+        let (agg, imp) = aggregate(&rows, &BTreeMap::new());
+        let previous: Vec<&ImprovementRow> = imp.iter().filter(|i| i.against == Against::PreviousIteration).collect();
+        assert_eq!(previous.len(), 1, "{imp:?}");
+        let p = previous[0];
+        assert_eq!((p.method.as_str(), p.baseline.as_str()), ("idrex-multi-bc (k=3)", "idrex-multi-bc"));
+        assert_eq!((p.improvement.wins, p.improvement.pairs), (2, 3));
+        let k3 = agg.iter().find(|a| a.method == "idrex-multi-bc (k=3)").unwrap();
+        assert_eq!(find(&imp, k3, Against::PreviousIteration), Some(p));
+        assert!(markdown(&agg, &imp).contains("against K - 1"));
+        assert!(Table::of(&imp).csv().contains("idrex-multi-bc (k=3),idrex-multi-bc,3,"));
     }
 }

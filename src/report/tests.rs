@@ -167,3 +167,12 @@ fn a_study_whose_files_disagree_on_the_demonstrations_is_refused() {
     let err = build(&s).err().expect("refused").to_string();
     assert!(err.contains("disagree on the demonstrations"), "{err}");
 }
+
+#[test]
+fn the_previous_iteration_is_named_from_a_label_past_k_2() {
+    assert_eq!(previous_iteration(&method_label(Method::IdrexMultiBc, 3)).as_deref(), Some("idrex-multi-bc"));
+    assert_eq!(previous_iteration(&method_label(Method::IdrexMultiBc, 4)).as_deref(), Some("idrex-multi-bc (k=3)"));
+    for none in [method_label(Method::IdrexMultiBc, 2), method_label(Method::Drex, 1), "nope (k=3)".into(), "drex (k=x)".into()] {
+        assert_eq!(previous_iteration(&none), None, "{none}");
+    }
+}

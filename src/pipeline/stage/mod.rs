@@ -203,6 +203,20 @@ impl Params {
     }
 }
 
+/// The key a recorded manifest's definition hashes to, from its parameters' text as written
+/// (`params_text`, an archive line's): most kinds key on every parameter, hashed from that
+/// text so no float moves by an ulp; the rest (an import keys on its file's digest, not its
+/// path) on what their kind says.
+pub fn recorded_key(m: &crate::store::Manifest, params_text: &str) -> Result<String> {
+    let kind = StageKind::parse(&m.kind).ok_or_else(|| Error::Invalid(format!("unknown stage kind '{}'", m.kind)))?;
+    let keyed = Params::from_json(kind, &m.params)?.key_json();
+    Ok(if keyed == m.params {
+        crate::store::key_of_text(&m.kind, m.version, params_text, m.seed, &m.inputs)
+    } else {
+        crate::store::key(&m.kind, m.version, &keyed, m.seed, &m.inputs)
+    })
+}
+
 impl Params {
     /// The device the stage computes on (the CPU for kinds that have no choice).
     pub fn device(&self) -> Device {
