@@ -152,6 +152,10 @@ fn a_study_of_two_replicates_is_aggregated_over_them() {
     assert!(md.contains("## The answer") && md.contains("Hopper-v5, fixture (2 replicates)"), "{md}");
     assert!(md.contains("| Hopper-v5 | fixture/r1 | 1100.0 | 1150.0 | 1000.0 ± 10.0 (1000.0, 2 episodes) | 2200.0 ± 100.5 (2300.0, 2 runs, 4 episodes) | missing |"), "{md}");
     assert!(md.contains("2 of 2") && md.contains("only 2 replicates"), "{md}");
+    // The answer's D-REX row: against BC in both forms; D-REX and K - 1 do not apply.
+    let answer = &md[..md.find("## How often").unwrap_or(md.len())];
+    assert!(answer.contains("| against BC | against D-REX | against K - 1 |"), "{answer}");
+    assert!(answer.contains("| D-REX | 2250.0 [") && answer.contains("| P 1.00 [1.00, 1.00]; 2 of 2 [0.16, 1.00], p = 0.250 ⚠ only 2 replicates; every pair agrees, so the bootstrap interval is a point | - | - | 2 of 2 (p = 0.250"), "{answer}");
 }
 
 #[test]
