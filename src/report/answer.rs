@@ -80,9 +80,15 @@ fn sentence(above_both: &[String], on_average: &[String], below: &[String], scop
     format!("{}. {scope}\n", capitalise(&parts.join("; ")))
 }
 
+/// The sentence's first letter in upper case, unless it opens a name spelled with a
+/// lower-case first letter (iD-REX).
 fn capitalise(s: &str) -> String {
     let mut c = s.chars();
-    c.next().map_or(String::new(), |f| f.to_uppercase().collect::<String>() + c.as_str())
+    match (c.next(), c.next()) {
+        (Some(_), Some(second)) if second.is_uppercase() => s.to_string(),
+        (Some(first), _) => first.to_uppercase().collect::<String>() + &s[first.len_utf8()..],
+        _ => String::new(),
+    }
 }
 
 /// The answer for every table of the report: replicated studies from their aggregate rows,
@@ -247,6 +253,10 @@ mod tests {
             row("idrex-action-noise", 50.0, (0.0, 90.0), 3),
         ];
         let demos = BTreeMap::from([(("Hopper-v5".to_string(), "p".to_string()), vec![140.0, 160.0])]);
+        assert_eq!(
+            (capitalise("iD-REX multi-BC is"), capitalise("d-REX is"), capitalise("")),
+            ("iD-REX multi-BC is".into(), "D-REX is".into(), String::new())
+        );
         let md = markdown(&rows, &[], &[], &demos, &[]);
         assert!(md.starts_with("## The answer\n\n### Hopper-v5, p\n"), "{md}");
         assert!(md.contains("BC 100.0; the demonstrations 150.0 (average)"), "{md}");

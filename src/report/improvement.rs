@@ -6,14 +6,22 @@ use crate::stats::Improvement;
 /// Under every table with comparisons: what its two forms mean.
 pub const LEGEND: &str = "\nAgainst a baseline: rliable's probability of improvement (unpaired: every replicate of one against every \
 replicate of the other) with rliable's independent-bootstrap 95 % interval; then, paired by replicate (replicate r of both \
-shares its seeds), the replicates where the method scored above, the exact 95 % interval of that rate and the one-sided \
-sign test's p. ⚠ marks fewer than 10 replicates, or an interval that is a point because every pair agrees.\n\n";
+shares its seeds), the replicates where the method scored above, of those that did not tie, the exact 95 % interval of \
+that rate and the one-sided sign test's p (ties are counted apart). ⚠ marks fewer than 10 replicates, or an interval that \
+is a point because every pair agrees.\n\n";
 
-/// One table cell: `P 0.56 [0.08, 0.96]; 3 of 5 [0.15, 0.95], p = 0.500 ⚠ only 5 replicates`.
+/// One table cell: `P 0.56 [0.08, 0.96]; 3 of 5 [0.15, 0.95], p = 0.500 ⚠ only 5 replicates`, with
+/// `, 2 ties` before the warning where replicates tied.
 pub fn improvement_cell(i: &Improvement) -> String {
     let warn = i.warning().map_or(String::new(), |w| format!(" ⚠ {w}"));
+    // Tied replicates (an iteration that repeats the one before, bit for bit) leave the count.
+    let ties = match i.ties {
+        0 => String::new(),
+        1 => ", 1 tie".to_string(),
+        n => format!(", {n} ties"),
+    };
     format!(
-        "P {:.2} [{:.2}, {:.2}]; {} of {} [{:.2}, {:.2}], p = {:.3}{warn}",
+        "P {:.2} [{:.2}, {:.2}]; {} of {} [{:.2}, {:.2}], p = {:.3}{ties}{warn}",
         i.unpaired,
         i.unpaired_ci.0,
         i.unpaired_ci.1,

@@ -340,7 +340,7 @@ pub(super) mod tests {
     #[test]
     fn an_iteration_past_two_is_compared_with_the_one_before() {
         let mut rows = Vec::new();
-        for (r, k2, k3) in [(0, 1.0, 2.0), (1, 5.0, 3.0), (2, 4.0, 6.0)] {
+        for (r, k2, k3) in [(0, 1.0, 2.0), (1, 5.0, 3.0), (2, 4.0, 6.0), (3, 7.0, 7.0)] {
             rows.push(row("s", r, "drex", &[0.0]));
             rows.push(row("s", r, "idrex-multi-bc", &[k2]));
             rows.push(row("s", r, "idrex-multi-bc (k=3)", &[k3]));
@@ -350,10 +350,12 @@ pub(super) mod tests {
         assert_eq!(previous.len(), 1, "{imp:?}");
         let p = previous[0];
         assert_eq!((p.method.as_str(), p.baseline.as_str()), ("idrex-multi-bc (k=3)", "idrex-multi-bc"));
-        assert_eq!((p.improvement.wins, p.improvement.pairs), (2, 3));
+        assert_eq!((p.improvement.wins, p.improvement.ties, p.improvement.pairs), (2, 1, 4));
+        assert!(super::super::improvement::improvement_cell(&p.improvement).contains("; 2 of 3 ["), "ties leave the count");
+        assert!(super::super::improvement::improvement_cell(&p.improvement).contains(", 1 tie ⚠ only 4 replicates"));
         let k3 = agg.iter().find(|a| a.method == "idrex-multi-bc (k=3)").unwrap();
         assert_eq!(find(&imp, k3, Against::PreviousIteration), Some(p));
         assert!(markdown(&agg, &imp).contains("against K - 1"));
-        assert!(Table::of(&imp).csv().contains("idrex-multi-bc (k=3),idrex-multi-bc,3,"));
+        assert!(Table::of(&imp).csv().contains("idrex-multi-bc (k=3),idrex-multi-bc,4,"));
     }
 }
