@@ -265,6 +265,19 @@ impl Improvement {
         self.wins as f64 / (self.pairs - self.ties) as f64
     }
 
+    /// Whether the comparison decides anything at the 5 % level: both forms must agree, the
+    /// rliable interval clear of 0.5 and the paired sign test (of wins, or of losses) below 0.05.
+    pub fn verdict(&self) -> Verdict {
+        let untied = self.pairs - self.ties;
+        if self.unpaired_ci.0 > 0.5 && self.sign_p < 0.05 {
+            Verdict::Better
+        } else if self.unpaired_ci.1 < 0.5 && sign_test_p(untied - self.wins, untied) < 0.05 {
+            Verdict::Worse
+        } else {
+            Verdict::NoDifferenceShown
+        }
+    }
+
     /// What the reader must know before trusting the figures, or None.
     pub fn warning(&self) -> Option<String> {
         let mut w = Vec::new();
@@ -276,6 +289,14 @@ impl Improvement {
         }
         (!w.is_empty()).then(|| w.join("; "))
     }
+}
+
+/// What a comparison of two methods shows ([`Improvement::verdict`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Better,
+    Worse,
+    NoDifferenceShown,
 }
 
 /// Spearman rank correlation (average ranks for ties).
@@ -409,6 +430,13 @@ mod tests {
         assert!((imp.sign_p - 1.0 / 32.0).abs() < 1e-12);
         let w = imp.warning().unwrap();
         assert!(w.contains("only 5 replicates") && w.contains("a point"), "{w}");
+        // Five of five decides at 5 % (p = 1/32); four of four does not (p = 1/16); five
+        // losses decide the other way; a tie everywhere decides nothing.
+        assert_eq!(imp.verdict(), Verdict::Better);
+        assert_eq!(Improvement::of(&pairs[..4], 10_000, 0).verdict(), Verdict::NoDifferenceShown);
+        let lost: Vec<(f64, f64)> = pairs.iter().map(|&(a, b)| (b, a)).collect();
+        assert_eq!(Improvement::of(&lost, 10_000, 0).verdict(), Verdict::Worse);
+        assert_eq!(Improvement::of(&[(1.0, 1.0); 6], 1000, 0).verdict(), Verdict::NoDifferenceShown);
         // Ties leave the rate and the test.
         let imp = Improvement::of(&[(1.0, 1.0), (2.0, 1.0), (0.0, 1.0)], 1000, 0);
         assert_eq!((imp.wins, imp.ties, imp.paired()), (1, 1, 0.5));

@@ -12,7 +12,7 @@ use super::looks::LookRow;
 use super::studies::{Against, AggregateRow, ImprovementRow, find};
 use super::{Protocol, ProtocolRow, num};
 use crate::pipeline::Method;
-use crate::stats::{WinCount, mean, sign_test_p};
+use crate::stats::{Verdict, WinCount, mean, sign_test_p};
 
 /// How a method's return stands against a reference (BC's, or the demonstrations' average).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,6 +78,42 @@ fn sentence(above_both: &[String], on_average: &[String], below: &[String], scop
         parts.push(format!("{} {} not above both", list(below), if below.len() == 1 { "is" } else { "are" }));
     }
     format!("{}. {scope}\n", capitalise(&parts.join("; ")))
+}
+
+/// One line per comparison between learned-reward methods (against D-REX, against K - 1):
+/// what it decides at the 5 % level, in words, with the figures it rests on.
+fn verdicts(rows: &[&AggregateRow], improvement: &[ImprovementRow]) -> String {
+    let mut lines = Vec::new();
+    for r in rows {
+        for (against, what) in [(Against::Drex, "D-REX"), (Against::PreviousIteration, "K - 1")] {
+            let Some(i) = find(improvement, r, against) else { continue };
+            let m = i.improvement;
+            let words = match m.verdict() {
+                Verdict::Better => "beats",
+                Verdict::Worse => "is beaten by",
+                Verdict::NoDifferenceShown => "shows no difference from",
+            };
+            let ties = if m.ties > 0 { format!(", {} tied", m.ties) } else { String::new() };
+            lines.push(format!(
+                "{} {words} {what} (P {:.2} [{:.2}, {:.2}]; above on {} of {} replicates{ties}, p = {:.3}).",
+                display(&r.method),
+                m.unpaired,
+                m.unpaired_ci.0,
+                m.unpaired_ci.1,
+                m.wins,
+                m.pairs,
+                m.sign_p
+            ));
+        }
+    }
+    if lines.is_empty() {
+        return String::new();
+    }
+    format!(
+        "\nBetween learned-reward methods, at the 5 % level (a difference needs rliable's interval clear of 0.5 and the sign \
+         test below 0.05): {}\n",
+        lines.join(" ")
+    )
 }
 
 /// The sentence's first letter in upper case, unless it opens a name spelled with a
@@ -214,6 +250,7 @@ pub fn markdown(
         };
         let s = sentence(&both, &avg, &below, &format!("Each replicate has its own seeds, BC and learned rewards.{small}"));
         out.push_str(&s.replace("with intervals clear of them", "on every replicate, the mean's interval clear of BC's"));
+        out.push_str(&verdicts(rows, improvement));
         out.push('\n');
     }
     if out.is_empty() {
@@ -273,5 +310,33 @@ mod tests {
         // Without BC or the demonstrations there is nothing to answer against.
         assert_eq!(markdown(&rows[1..], &[], &[], &demos, &[]), "");
         assert_eq!(markdown(&rows, &[], &[], &BTreeMap::new(), &[]), "");
+    }
+
+    /// Ten replicates: multi-BC above D-REX on 9 decides; K = 3 against K = 2, tied on four
+    /// and split on the rest, does not, and the answer says so in words.
+    #[test]
+    fn a_replicated_answer_says_which_comparisons_decide() {
+        use crate::report::studies::{aggregate, tests::row as replicate};
+        let mut rows = Vec::new();
+        for r in 0..10 {
+            let k2 = if r == 0 { 1.0 } else { 300.0 + r as f64 };
+            let k3 = if r < 4 {
+                k2
+            } else if r % 2 == 0 {
+                k2 + 1.0
+            } else {
+                k2 - 1.0
+            };
+            rows.push(replicate("s", r, "bc", &[100.0]));
+            rows.push(replicate("s", r, "drex", &[200.0]));
+            rows.push(replicate("s", r, "idrex-multi-bc", &[k2]));
+            rows.push(replicate("s", r, "idrex-multi-bc (k=3)", &[k3]));
+        }
+        let (agg, imp) = aggregate(&rows, &BTreeMap::new());
+        let md = markdown(&rows, &agg, &imp, &BTreeMap::new(), &[]);
+        assert!(md.contains("iD-REX multi-BC beats D-REX (P 0.90 ["), "{md}");
+        assert!(md.contains("above on 9 of 10 replicates, p = 0.011)"), "{md}");
+        assert!(md.contains("iD-REX multi-BC (k=3) shows no difference from K - 1 (P "), "{md}");
+        assert!(md.contains("above on 3 of 10 replicates, 4 tied, p = 0.656)"), "{md}");
     }
 }
