@@ -84,7 +84,7 @@ fn sentence(above_both: &[String], on_average: &[String], below: &[String], scop
 /// what it decides at the 5 % level, in words, with the figures it rests on.
 fn verdicts(rows: &[&AggregateRow], improvement: &[ImprovementRow]) -> String {
     let mut lines = Vec::new();
-    for r in rows {
+    for r in rows.iter().filter(|r| r.method != Method::Bc.name()) {
         for (against, what) in [(Against::Drex, "D-REX"), (Against::PreviousIteration, "K - 1")] {
             let Some(i) = find(improvement, r, against) else { continue };
             let m = i.improvement;
@@ -338,5 +338,6 @@ mod tests {
         assert!(md.contains("above on 9 of 10 replicates, p = 0.011)"), "{md}");
         assert!(md.contains("iD-REX multi-BC (k=3) shows no difference from K - 1 (P "), "{md}");
         assert!(md.contains("above on 3 of 10 replicates, 4 tied, p = 0.656)"), "{md}");
+        assert!(!md.contains("BC shows") && !md.contains("BC is beaten"), "BC is no learned-reward method: {md}");
     }
 }
