@@ -346,11 +346,16 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let g = expand(&p)?;
     let manifests = store.unverified_manifests()?;
     let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
-    let mut seen = manifests.clone();
+    let mut archived = Vec::new();
     for a in &args.archive {
-        seen.extend(crate::store::archive::read(a, stage::recorded_key)?.into_iter().filter(|m| !present.contains(m.key.as_str())));
+        archived.extend(crate::store::archive::read(a, stage::recorded_key)?.into_iter().filter(|m| !present.contains(m.key.as_str())));
     }
-    let looks = crate::pipeline::test_set::Looks::new(&seen);
+    // The store's manifests are copied only when archives join them.
+    let looks = if archived.is_empty() {
+        crate::pipeline::test_set::Looks::new(&manifests)
+    } else {
+        crate::pipeline::test_set::Looks::new(&[manifests.clone(), archived].concat())
+    };
     let test_set = crate::pipeline::test_set::check(&p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
         if test_set.is_some() {

@@ -222,8 +222,9 @@ pub fn markdown(
             let paired: Vec<bool> = r.scores.iter().filter_map(|(rep, s)| bc_of.get(rep).map(|b| s > b)).collect();
             let over_bc = WinCount { k: paired.iter().filter(|&&w| w).count(), n: paired.len() };
             let over_demos = r.above_demos_avg;
-            let against = |a: Against| find(improvement, r, a).map_or("-".to_string(), |i| improvement_cell(&i.improvement));
-            let over_bc_cell = find(improvement, r, Against::Bc).map_or(over_bc.to_string(), |i| improvement_cell(&i.improvement));
+            let cell = |a: Against| find(improvement, r, a).map(|i| improvement_cell(&i.improvement));
+            let against = |a: Against| cell(a).unwrap_or_else(|| "-".to_string());
+            let over_bc_cell = cell(Against::Bc).unwrap_or_else(|| over_bc.to_string());
             out.push_str(&format!(
                 "| {} | {} [{}, {}] | {over_bc_cell} | {} | {} | {over_demos} |\n",
                 display(&r.method),
