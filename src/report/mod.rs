@@ -28,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::log::table::Table;
 use crate::pipeline::Method;
 use crate::pipeline::stage::{Metrics, Params, Typed};
-use crate::stats::spearman;
+use crate::stats::{pearson, spearman};
 use crate::store::{Manifest, Store};
 
 pub use crate::algo::scoring::{Selection, select};
@@ -77,11 +77,15 @@ struct Long {
     demo_returns: BTreeMap<(String, String), Vec<f64>>,
 }
 
-/// How well the learned reward ranks one PPO run's own policies over training: Spearman
-/// correlation, over the checkpoints, of the ensemble-mean learned return with the true
-/// return (NaN without learned scores). Negative means PPO climbing the learned reward
-/// walked down the true one.
-pub fn over_checkpoints(checkpoints: &[CheckpointEval]) -> f64 {
+/// How well the learned reward tracks one PPO run's own policies over training: the
+/// `correlation` (Spearman or Pearson), over the checkpoints, of the ensemble-mean learned
+/// return with the true return, each the mean over the checkpoint's evaluation episodes
+/// (NaN without learned scores). Negative means PPO climbing the learned reward walked down
+/// the true one. These policies are trajectories T-REX never saw, from poor to trained:
+/// Pearson over them is the number SSRR reports as the reward's correlation with the true
+/// return (SSRR pools single episodes, and its training set, where this takes checkpoint
+/// means).
+pub fn over_checkpoints(checkpoints: &[CheckpointEval], correlation: fn(&[f64], &[f64]) -> f64) -> f64 {
     let scored: Vec<(f64, f64)> = checkpoints
         .iter()
         .filter_map(|c| c.learned.map(|l| (l.mean, c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64)))
@@ -90,7 +94,7 @@ pub fn over_checkpoints(checkpoints: &[CheckpointEval]) -> f64 {
         return f64::NAN;
     }
     let (learned, truth): (Vec<f64>, Vec<f64>) = scored.into_iter().unzip();
-    spearman(&learned, &truth)
+    correlation(&learned, &truth)
 }
 
 /// The store's intact artifacts, read and verified once, and any archives' manifests
@@ -135,7 +139,8 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let (mut env, mut method, mut pipeline, mut run, mut ret) = (vec![], vec![], vec![], vec![], vec![]);
     let (mut d_env, mut d_pipeline, mut d_ret) = (vec![], vec![], vec![]);
     let (mut a_env, mut a_pipeline, mut a_method) = (vec![], vec![], vec![]);
-    let (mut a_pearson, mut a_spearman, mut a_pairwise, mut a_over_checkpoints) = (vec![], vec![], vec![], vec![]);
+    let (mut a_pearson, mut a_spearman, mut a_pairwise) = (vec![], vec![], vec![]);
+    let (mut a_spearman_checkpoints, mut a_pearson_checkpoints) = (vec![], vec![]);
     let mut a_capped: Vec<Option<f64>> = vec![];
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, TableId, String), Vec<RunEval>> = BTreeMap::new();
@@ -189,7 +194,8 @@ fn collect(store: &Artifacts) -> Result<Long> {
             a_spearman.push(acc.spearman);
             a_pearson.push(acc.pearson);
             a_pairwise.push(acc.pairwise_accuracy);
-            a_over_checkpoints.push(over_checkpoints(&x.checkpoints));
+            a_spearman_checkpoints.push(over_checkpoints(&x.checkpoints, spearman));
+            a_pearson_checkpoints.push(over_checkpoints(&x.checkpoints, pearson));
             // The PPO run behind the policy: how much of its learned reward the ceiling capped.
             let ppo = m.inputs.get(&Role::Policy.name()).and_then(|k| store.get(k)).and_then(|pm| Typed::of(pm).ok());
             a_capped.push(match ppo {
@@ -242,7 +248,8 @@ fn collect(store: &Artifacts) -> Result<Long> {
             Column::new("pearson".into(), a_pearson),
             Column::new("spearman".into(), a_spearman),
             Column::new("pairwise_accuracy".into(), a_pairwise),
-            Column::new("spearman_over_checkpoints".into(), a_over_checkpoints),
+            Column::new("spearman_over_checkpoints".into(), a_spearman_checkpoints),
+            Column::new("pearson_over_checkpoints".into(), a_pearson_checkpoints),
             Column::new("reward_capped".into(), a_capped),
         ])?,
         runs,
@@ -345,6 +352,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
             col("spearman").mean(),
             col("pairwise_accuracy").mean(),
             col("spearman_over_checkpoints").mean(),
+            col("pearson_over_checkpoints").mean(),
             col("reward_capped").mean(),
             col("spearman").count().alias("runs"),
         ])
@@ -389,6 +397,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
                 spearman: f(&accuracy, "spearman", i),
                 pairwise_accuracy: f(&accuracy, "pairwise_accuracy", i),
                 spearman_over_checkpoints: f(&accuracy, "spearman_over_checkpoints", i),
+                pearson_over_checkpoints: f(&accuracy, "pearson_over_checkpoints", i),
                 reward_capped: cell_f(&accuracy, "reward_capped", i),
                 runs: n(&accuracy, "runs", i),
             })

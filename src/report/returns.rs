@@ -43,6 +43,8 @@ pub struct AccuracyRow {
     pub spearman: f64,
     pub pairwise_accuracy: f64,
     pub spearman_over_checkpoints: f64,
+    /// SSRR's number: see [`super::over_checkpoints`].
+    pub pearson_over_checkpoints: f64,
     /// With `reward.ceiling`: the mean over runs of the fraction of the members' per-step
     /// values PPO trained on that the ceiling capped (None without a ceiling).
     pub reward_capped: Option<f64>,
@@ -84,7 +86,7 @@ impl Row for DemoRow {
 
 impl Row for AccuracyRow {
     fn header() -> Vec<&'static str> {
-        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "reward_capped", "runs"]
+        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "pearson_over_checkpoints", "reward_capped", "runs"]
     }
     fn cells(&self) -> Vec<Cell> {
         let x = |v: f64| Cell::opt(Some(v), 3);
@@ -96,6 +98,7 @@ impl Row for AccuracyRow {
             x(self.spearman),
             x(self.pairwise_accuracy),
             x(self.spearman_over_checkpoints),
+            x(self.pearson_over_checkpoints),
             Cell::opt(self.reward_capped, 3),
             Cell::int(self.runs),
         ]
@@ -149,8 +152,9 @@ pub fn markdown(t: &Tables) -> String {
     out.push_str(concat!(
         "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
         "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
-        "Over checkpoints: Spearman correlation of learned and true return across each PPO run's checkpoints ",
-        "(does climbing the learned reward climb the true one?). Capped by the ceiling: the fraction of the learned ",
+        "Over checkpoints: Spearman and Pearson correlation of learned and true return across each PPO run's checkpoints ",
+        "(does climbing the learned reward climb the true one? Pearson over these unseen policies is the number SSRR ",
+        "reports, there per episode). Capped by the ceiling: the fraction of the learned ",
         "reward's per-step values PPO trained on that `reward.ceiling` cut (n/a without a ceiling).\n\n",
     ));
     let mut accuracy = Table::of(&t.accuracy);
@@ -162,6 +166,7 @@ pub fn markdown(t: &Tables) -> String {
         "Spearman",
         "pairwise accuracy",
         "Spearman over checkpoints",
+        "Pearson over checkpoints",
         "capped by the ceiling",
         "runs",
     ]

@@ -180,3 +180,24 @@ fn the_previous_iteration_is_named_from_a_label_past_k_2() {
         assert_eq!(previous_iteration(&none), None, "{none}");
     }
 }
+
+#[test]
+fn the_reward_is_correlated_with_the_truth_over_a_runs_checkpoints() {
+    let ckpt = |step, truth: f64, learned: Option<f64>| CheckpointEval {
+        step,
+        returns: vec![truth - 1.0, truth + 1.0],
+        learned: learned.map(|mean| LearnedScore { mean, pessimistic: 0.0, spread: 0.0 }),
+    };
+    // The learned return rises with the truth, but not in proportion: ranks agree exactly,
+    // the linear fit does not.
+    let run: Vec<_> = [(0, 100.0, 1.0), (1, 200.0, 2.0), (2, 300.0, 3.0), (3, 400.0, 30.0)]
+        .into_iter()
+        .map(|(s, t, l)| ckpt(s, t, Some(l)))
+        .collect();
+    assert_eq!(over_checkpoints(&run, spearman), 1.0);
+    let r = over_checkpoints(&run, pearson);
+    // Pearson of (1, 2, 3, 30) with (100, 200, 300, 400) (numpy.corrcoef): 0.8101.
+    assert!((r - 0.8101).abs() < 1e-4, "{r}");
+    let unscored = [ckpt(0, 100.0, Some(1.0)), ckpt(1, 200.0, None)];
+    assert!(over_checkpoints(&unscored, pearson).is_nan());
+}
