@@ -86,7 +86,18 @@ impl Row for DemoRow {
 
 impl Row for AccuracyRow {
     fn header() -> Vec<&'static str> {
-        vec!["env", "pipeline", "method", "pearson", "spearman", "pairwise_accuracy", "spearman_over_checkpoints", "pearson_over_checkpoints", "reward_capped", "runs"]
+        vec![
+            "env",
+            "pipeline",
+            "method",
+            "pearson",
+            "spearman",
+            "pairwise_accuracy",
+            "spearman_over_checkpoints",
+            "pearson_over_checkpoints",
+            "reward_capped",
+            "runs",
+        ]
     }
     fn cells(&self) -> Vec<Cell> {
         let x = |v: f64| Cell::opt(Some(v), 3);

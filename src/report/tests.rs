@@ -190,10 +190,8 @@ fn the_reward_is_correlated_with_the_truth_over_a_runs_checkpoints() {
     };
     // The learned return rises with the truth, but not in proportion: ranks agree exactly,
     // the linear fit does not.
-    let run: Vec<_> = [(0, 100.0, 1.0), (1, 200.0, 2.0), (2, 300.0, 3.0), (3, 400.0, 30.0)]
-        .into_iter()
-        .map(|(s, t, l)| ckpt(s, t, Some(l)))
-        .collect();
+    let run: Vec<_> =
+        [(0, 100.0, 1.0), (1, 200.0, 2.0), (2, 300.0, 3.0), (3, 400.0, 30.0)].into_iter().map(|(s, t, l)| ckpt(s, t, Some(l))).collect();
     assert_eq!(over_checkpoints(&run, spearman), 1.0);
     let r = over_checkpoints(&run, pearson);
     // Pearson of (1, 2, 3, 30) with (100, 200, 300, 400) (numpy.corrcoef): 0.8101.
