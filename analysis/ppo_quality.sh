@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # PPO on the ground-truth reward, CleanRL's settings: 1M steps, seeds 0-2, HalfCheetah-v5 and
-# Hopper-v5; then the final stochastic policy's mean return over 20 episodes (idrex eval).
-# Two runs at a time (one core each). Usage: analysis/ppo_quality.sh [OUT_DIR] [STEPS]
+# Hopper-v5 (or the tasks named in ENVS); then the final stochastic policy's mean return over
+# 20 episodes (idrex eval). Two runs at a time (one core each).
+# Usage: [ENVS="Ant-v5"] analysis/ppo_quality.sh [OUT_DIR] [STEPS]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out="${1:-runs/ppo-quality}"
@@ -9,7 +10,7 @@ steps="${2:-1000000}"
 bin="$(cargo metadata --format-version 1 --no-deps | python3 -c 'import json,sys; print(json.load(sys.stdin)["target_directory"])')/release/idrex"
 mkdir -p "$out"
 jobs=()
-for env in HalfCheetah-v5 Hopper-v5; do
+for env in ${ENVS:-HalfCheetah-v5 Hopper-v5}; do
   for seed in 0 1 2; do
     jobs+=("$env $seed")
   done

@@ -1,6 +1,7 @@
 """What a store's policies are paid for: each method's evaluation episodes (final policies)
 and demonstrations split into the environment's reward terms (forward, survive, control and
-contact cost), with episode length, distance travelled and the learned return; and, pooled
+contact cost), with episode length, net forward displacement (forward reward x dt, for a
+forward weight of 1) and the learned return; and, pooled
 over the final policies' episodes, what the learned return correlates with.
 
 Read with Python's `mcap` reader from the stored rollouts.mcap files, as a user would.
@@ -35,16 +36,20 @@ def episodes(path):
             e["reward"] += s["reward"]
             for t in TERMS:
                 e[t] += s.get(t, 0.0)
+            if s.get("truncated"):
+                e["truncated"] = 1
             if "learned_reward" in s:
                 e["learned"] += s["learned_reward"]
                 e["has_learned"] = 1
         for meta in reader.iter_metadata():
             if meta.name == "idrex.rollout":
                 dt = float(meta.metadata["dt"])
+    if dt is None:
+        raise SystemExit(f"{path}: no idrex.rollout metadata with dt")
     out = []
     for k in sorted(eps):
         e = dict(eps[k])
-        e["distance"] = e["reward_forward"] * dt
+        e["displacement"] = e["reward_forward"] * dt
         out.append(e)
     return out
 
@@ -103,19 +108,19 @@ def main():
             continue
         merged[(pipeline, label)].extend(eps)
 
-    cols = ["length", "reward", "reward_forward", "reward_survive", "reward_ctrl", "reward_contact", "distance", "learned"]
+    cols = ["length", "reward", "reward_forward", "reward_survive", "reward_ctrl", "reward_contact", "displacement", "learned"]
     rows = []
-    for (pipeline, label), eps in sorted(merged.items()):
+    for (pipeline, label), eps in sorted(merged.items(), key=lambda kv: (str(kv[0][0]), kv[0][1])):
         n = len(eps)
         row = {"pipeline": pipeline, "source": label, "episodes": n}
         for c in cols:
             vals = [e.get(c, 0.0) for e in eps]
             row[c] = sum(vals) / n if (c != "learned" or all(e.get("has_learned") for e in eps)) else None
-        row["full_length"] = sum(e["length"] >= 1000 for e in eps) / n
+        row["time_limit"] = sum(e.get("truncated", 0) for e in eps) / n
         rows.append(row)
 
-    hdr = ["pipeline", "source", "episodes", "length", "full_length", "reward", "reward_forward", "reward_survive",
-           "reward_ctrl", "reward_contact", "distance", "learned"]
+    hdr = ["pipeline", "source", "episodes", "length", "time_limit", "reward", "reward_forward", "reward_survive",
+           "reward_ctrl", "reward_contact", "displacement", "learned"]
     print("| " + " | ".join(hdr) + " |")
     print("|" + "---|" * len(hdr))
     for r in rows:
@@ -125,14 +130,14 @@ def main():
     # What the learned return tracks, over the final policies' evaluation episodes (unseen by
     # T-REX), pooled per pipeline and method.
     print()
-    print("| pipeline | method | episodes | learned vs true return | vs forward | vs survive (length) | vs distance |")
+    print("| pipeline | method | episodes | learned vs true return | vs forward | vs survive (length) | vs displacement |")
     print("|---|---|---|---|---|---|---|")
-    for (pipeline, label), eps in sorted(merged.items()):
+    for (pipeline, label), eps in sorted(merged.items(), key=lambda kv: (str(kv[0][0]), kv[0][1])):
         if not all(e.get("has_learned") for e in eps) or len(eps) < 3:
             continue
         le = [e["learned"] for e in eps]
         print(f"| {pipeline} | {label} | {len(eps)} | "
-              + " | ".join(f"{pearson(le, [e[c] for e in eps]):.3f}" for c in ["reward", "reward_forward", "reward_survive", "distance"])
+              + " | ".join(f"{pearson(le, [e[c] for e in eps]):.3f}" for c in ["reward", "reward_forward", "reward_survive", "displacement"])
               + " |")
 
     # Per replicate (the unit of replication: a replicate's runs share its seeds and reward),
@@ -140,14 +145,16 @@ def main():
     print()
     print("| pipeline | source | forward reward per episode, replicates 0.. | above BC's (paired) |")
     print("|---|---|---|---|")
-    for (pipeline, label), eps in sorted(merged.items()):
+    for (pipeline, label), eps in sorted(merged.items(), key=lambda kv: (str(kv[0][0]), kv[0][1])):
         reps = sorted({e["replicate"] for e in eps})
         fwd = {r: sum(e["reward_forward"] for e in eps if e["replicate"] == r) / sum(e["replicate"] == r for e in eps) for r in reps}
         bc = merged.get((pipeline, "bc"), [])
         vs = "-"
         if label not in ("bc", "demos") and bc:
-            bc_fwd = {r: sum(e["reward_forward"] for e in bc if e["replicate"] == r) / max(1, sum(e["replicate"] == r for e in bc)) for r in reps}
-            vs = f"{sum(fwd[r] > bc_fwd[r] for r in reps)} of {len(reps)}"
+            bc_reps = sorted({e["replicate"] for e in bc} & set(reps))
+            bc_fwd = {r: sum(e["reward_forward"] for e in bc if e["replicate"] == r) / sum(e["replicate"] == r for e in bc) for r in bc_reps}
+            ties = sum(fwd[r] == bc_fwd[r] for r in bc_reps)
+            vs = f"{sum(fwd[r] > bc_fwd[r] for r in bc_reps)} of {len(bc_reps) - ties}" + (f", {ties} ties" if ties else "")
         print(f"| {pipeline} | {label} | " + ", ".join(f"{fwd[r]:.1f}" for r in reps) + f" | {vs} |")
 
     if args.csv:
