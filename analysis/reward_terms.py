@@ -19,6 +19,8 @@ from collections import defaultdict
 
 from mcap.reader import make_reader
 
+from checkpoints import pearson  # this folder's, one definition
+
 TERMS = ["reward_forward", "reward_survive", "reward_ctrl", "reward_contact"]
 
 
@@ -52,15 +54,6 @@ def episodes(path):
         e["displacement"] = e["reward_forward"] * dt
         out.append(e)
     return out
-
-
-def pearson(x, y):
-    n = len(x)
-    mx, my = sum(x) / n, sum(y) / n
-    cov = sum((a - mx) * (b - my) for a, b in zip(x, y))
-    vx = sum((a - mx) ** 2 for a in x)
-    vy = sum((b - my) ** 2 for b in y)
-    return cov / (vx * vy) ** 0.5 if vx > 0 and vy > 0 else float("nan")
 
 
 def main():
