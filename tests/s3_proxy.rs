@@ -34,6 +34,10 @@ struct State {
     rng: Mutex<u64>,
     requests: AtomicU64,
     injected: [AtomicU64; 5],
+    /// A cut upload was drawn for a request with no body: the next upload takes it. Which
+    /// request draws which fault depends on timing (two jobs share the proxy), so without this
+    /// a run could draw its cuts only on GETs and inject none.
+    cut_pending: AtomicBool,
     stop: AtomicBool,
 }
 
@@ -56,6 +60,7 @@ impl Proxy {
             rng: Mutex::new(seed | 1),
             requests: AtomicU64::new(0),
             injected: Default::default(),
+            cut_pending: AtomicBool::new(false),
             stop: AtomicBool::new(false),
         });
         let s = state.clone();
@@ -185,8 +190,21 @@ fn serve(s: &State, mut conn: TcpStream) {
     if up.write_all(&closing(&head)).is_err() {
         return;
     }
-    // Where a cut falls: somewhere in the upload's body, or in the answer's first kilobytes.
-    let cut_upload = (fault == Some(Fault::CutUpload)).then(|| s.next() % 4096);
+    // Where a cut falls: somewhere in the upload's body (within its declared length), or in
+    // the answer's first kilobytes.
+    let body = upload_length(&head);
+    let fault = match (fault, body) {
+        (Some(Fault::CutUpload), None) => {
+            s.cut_pending.store(true, Ordering::Relaxed);
+            None
+        }
+        (None, Some(_)) if s.cut_pending.swap(false, Ordering::Relaxed) => Some(Fault::CutUpload),
+        (f, _) => f,
+    };
+    let cut_upload = match (fault, body) {
+        (Some(Fault::CutUpload), Some(len)) => Some(s.next() % len.min(4096)),
+        _ => None,
+    };
     let cut_answer = (fault == Some(Fault::CutAnswer)).then(|| 1 + s.next() % 1024);
     let (mut c2, mut u2) = (conn.try_clone().unwrap(), up.try_clone().unwrap());
     let upload = std::thread::spawn(move || pipe(&rest, &mut c2, &mut u2, cut_upload));
@@ -200,6 +218,21 @@ fn serve(s: &State, mut conn: TcpStream) {
     if answered {
         s.count(Fault::CutAnswer);
     }
+}
+
+/// The declared body length of an upload (PUT or POST with a non-empty body), if the request is one.
+fn upload_length(head: &[u8]) -> Option<u64> {
+    let text = String::from_utf8_lossy(head);
+    let method = text.split(' ').next().unwrap_or("");
+    if method != "PUT" && method != "POST" {
+        return None;
+    }
+    let len = text.lines().find_map(|l| {
+        let (k, v) = l.split_once(':')?;
+        k.trim().eq_ignore_ascii_case("content-length").then(|| v.trim().parse::<u64>().ok()).flatten()
+    });
+    // A chunked upload declares no length; its body is at least a chunk header long.
+    Some(len.unwrap_or(4096)).filter(|&n| n > 0)
 }
 
 /// Copies `first` then `from` to `to` until `from` ends; with `cut`, stops after that many
