@@ -17,6 +17,11 @@ pub trait Actor {
     fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]);
     /// Called at the start of every episode (noise processes restart here).
     fn reset(&mut self) {}
+    /// The action to record for the step just acted, where it is not the one executed (a
+    /// demonstrator that acts with noise but labels its steps with its mean, as DART does).
+    fn label(&self) -> Option<&[f32]> {
+        None
+    }
 }
 
 impl<A: Actor + ?Sized> Actor for Box<A> {
@@ -25,6 +30,9 @@ impl<A: Actor + ?Sized> Actor for Box<A> {
     }
     fn reset(&mut self) {
         (**self).reset()
+    }
+    fn label(&self) -> Option<&[f32]> {
+        (**self).label()
     }
 }
 
@@ -51,7 +59,10 @@ pub fn episode(env: &mut Env, actor: &mut dyn Actor, seed: u64, meta: TrajMeta) 
         }
         let info = env.step(&a64, &mut obs64).expect("actor widths match the environment");
         t.obs.extend(obs64.iter().map(|&x| x as f32));
-        t.actions.extend_from_slice(&a32);
+        match actor.label() {
+            Some(label) => t.actions.extend(label.iter().zip(low.iter().zip(&high)).map(|(&a, (&l, &h))| (a as f64).clamp(l, h) as f32)),
+            None => t.actions.extend_from_slice(&a32),
+        }
         t.rewards.push(info.reward);
         t.terms.push(info.terms);
         if info.terminated || info.truncated {
@@ -89,10 +100,34 @@ pub fn at_levels<A: Actor>(
     out
 }
 
+/// How a stored policy's steps are taken and recorded.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Acting {
+    /// Sample from the policy's Gaussian; record the sampled action (clipped to the box).
+    #[default]
+    Sampled,
+    /// Act with the mean action and record it.
+    Mean,
+    /// Sample from the Gaussian but record the mean action: the demonstrator's own noise
+    /// widens the states seen while every label stays noise-free (DART, Laskey et al. 2017).
+    SampledMeanLabels,
+}
+
+impl Acting {
+    pub fn is_sampled(&self) -> bool {
+        *self == Acting::Sampled
+    }
+}
+
 /// A policy acting with its mean action or sampling from its Gaussian.
 pub struct PolicyActor {
     pub policy: CpuPolicy,
     pub stochastic: bool,
+    /// Record the mean action while sampling ([`Acting::SampledMeanLabels`]).
+    pub mean_labels: bool,
+    /// Scales the sampled deviation from the mean (1: the policy's own standard deviation).
+    pub noise_scale: f32,
     nobs: Vec<f32>,
     mean: Vec<f32>,
     scratch: Vec<f32>,
@@ -101,7 +136,24 @@ pub struct PolicyActor {
 impl PolicyActor {
     pub fn new(policy: CpuPolicy, stochastic: bool) -> Self {
         let (od, ad) = (policy.obs_dim(), policy.act_dim());
-        PolicyActor { policy, stochastic, nobs: vec![0.0; od], mean: vec![0.0; ad], scratch: Vec::new() }
+        PolicyActor {
+            policy,
+            stochastic,
+            mean_labels: false,
+            noise_scale: 1.0,
+            nobs: vec![0.0; od],
+            mean: vec![0.0; ad],
+            scratch: Vec::new(),
+        }
+    }
+
+    /// A stored policy acting and recording as `acting` says, its sampled deviations scaled
+    /// by `noise_scale`.
+    pub fn with(policy: &ActorCritic, acting: Acting, noise_scale: f64) -> Self {
+        let mut a = PolicyActor::new(policy.to_cpu(), acting != Acting::Mean);
+        a.mean_labels = acting == Acting::SampledMeanLabels;
+        a.noise_scale = noise_scale as f32;
+        a
     }
 
     /// How a stored policy acts: PPO policies (with a critic) sample, BC policies act with
@@ -122,9 +174,17 @@ impl Actor for PolicyActor {
         self.policy.mean(&self.nobs, &mut self.mean, &mut self.scratch);
         if self.stochastic {
             self.policy.sample(&self.mean, rng, out);
+            if self.noise_scale != 1.0 {
+                for (o, &m) in out.iter_mut().zip(&self.mean) {
+                    *o = m + self.noise_scale * (*o - m);
+                }
+            }
         } else {
             out.copy_from_slice(&self.mean);
         }
+    }
+    fn label(&self) -> Option<&[f32]> {
+        self.mean_labels.then_some(&self.mean[..])
     }
 }
 

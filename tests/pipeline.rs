@@ -46,6 +46,25 @@ fn smoke_pipeline_end_to_end() {
     assert!(again.status.success());
     assert_eq!(computed(&again), 0, "{}", stdout(&again));
 
+    // The smoke's BC (300 iterations) ends at 49 % of its demonstrations (its bytes are pinned,
+    // so these returns are the same everywhere): the first run says so when the BC lands, the
+    // re-run in its second line, before anything else.
+    let gap = "warning: bc: BC ends far below its demonstrations: 11.7 against their 24.1 (49 % of it; the warning is below 70 %";
+    assert!(stdout(&first).contains(gap), "{}", stdout(&first));
+    assert!(stdout(&again).lines().nth(1).is_some_and(|l| l.starts_with(gap)), "{}", stdout(&again));
+    // `eval.bc_warning` is the threshold, and no part of a key: at 0.4 the same store says nothing.
+    let lenient = dir.join("lenient");
+    std::fs::create_dir_all(&lenient).unwrap();
+    let text = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
+    assert!(text.contains("eval:\n  episodes: 3\n"));
+    std::fs::write(lenient.join("smoke.yaml"), text.replace("eval:\n  episodes: 3\n", "eval:\n  episodes: 3\n  bc_warning: 0.4\n"))
+        .unwrap();
+    let plan = |file: &Path| idrex(&["pipeline", "plan", file.to_str().unwrap(), "--store", store.to_str().unwrap()]);
+    assert!(stdout(&plan(&repo("pipelines/smoke.yaml"))).contains(gap));
+    let quiet = plan(&lenient.join("smoke.yaml"));
+    assert!(quiet.status.success() && !stdout(&quiet).contains("far below"), "{}", stdout(&quiet));
+    assert!(stdout(&quiet).contains("estimated: 0.0 min of stage time left"), "the same keys, all stored: {}", stdout(&quiet));
+
     // The recording passes rerun's own verifier.
     let rerun = Path::new(&python()).with_file_name("rerun");
     let v = Command::new(&rerun).args(["rrd", "verify", rec.to_str().unwrap()]).output().unwrap();
@@ -98,6 +117,7 @@ print("ok", len(sys.argv) - 1)
     let md = std::fs::read_to_string(out_dir.join("report.md")).unwrap();
     assert!(md.contains("| Hopper-v5 | smoke |"), "{md}");
     assert!(!md.contains("missing"), "every method has results: {md}");
+    assert!(md.contains("**BC ends far below its demonstrations: 11.7 against their 24.1 (49 % of it"), "the answer says it first: {md}");
     // What the tables do not show: episode counts, the rewards' validation accuracy, what
     // multi-BC's clone filter kept.
     assert!(md.contains(" episodes) |"), "{md}");

@@ -167,6 +167,43 @@ impl Fidelity {
     }
 }
 
+/// BC's return far below its demonstrations' (`eval.bc_warning`): D-REX ranks rollouts of BC
+/// degraded by noise, so its ranking then holds nothing near the demonstration to extrapolate
+/// from. Below means under `fraction` x the demonstrations' average, or under the average
+/// itself where that is negative.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CloneGap {
+    pub bc: f64,
+    pub demos: f64,
+    pub fraction: f64,
+}
+
+/// The threshold `eval.bc_warning` and `idrex report --bc-warning` default to.
+pub const BC_WARNING: f64 = 0.7;
+
+impl CloneGap {
+    /// The gap, where BC ends below the threshold.
+    pub fn check(bc: f64, demos: f64, fraction: f64) -> Option<CloneGap> {
+        let floor = if demos >= 0.0 { fraction * demos } else { demos };
+        (bc.is_finite() && demos.is_finite() && bc < floor).then_some(CloneGap { bc, demos, fraction })
+    }
+
+    /// One sentence for where a user looks first.
+    pub fn sentence(&self) -> String {
+        let share = if self.demos > 0.0 {
+            format!("{:.0} % of it; the warning is below {:.0} %", 100.0 * self.bc / self.demos, 100.0 * self.fraction)
+        } else {
+            "below it".into()
+        };
+        format!(
+            "BC ends far below its demonstrations: {:.1} against their {:.1} ({share}, `eval.bc_warning`). \
+             D-REX's ranking degrades this BC, so it holds nothing near the demonstrations to extrapolate from: expect the \
+             learned-reward methods to start from BC's level, not the demonstrator's.",
+            self.bc, self.demos
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -255,5 +292,18 @@ mod tests {
         let f = Fidelity::of(&[ep(100, 300.0), ep(100, 500.0)], &[ep(50, 200.0)], 0.0);
         assert_eq!((f.normalised, f.length_ratio), (0.5, 0.5));
         assert!(Fidelity::of(&[ep(10, 50.0)], &[ep(10, 40.0)], 0.0).normalised.is_nan(), "a source near random has none");
+    }
+
+    #[test]
+    fn a_clone_gap_is_below_the_fraction_or_below_a_negative_average() {
+        assert!(CloneGap::check(42.6, 214.1, 0.7).is_some());
+        assert!(CloneGap::check(150.0, 214.1, 0.7).is_none(), "150 is 70 % of 214.1");
+        assert!(CloneGap::check(-20.0, -10.0, 0.7).is_some(), "a negative average: below it");
+        assert!(CloneGap::check(-5.0, -10.0, 0.7).is_none());
+        assert!(CloneGap::check(f64::NAN, 100.0, 0.7).is_none(), "nothing measured, nothing said");
+        let s = CloneGap::check(42.6, 214.1, 0.7).unwrap().sentence();
+        assert!(s.contains("42.6 against their 214.1 (20 % of it; the warning is below 70 %, `eval.bc_warning`)"), "{s}");
+        let s = CloneGap::check(-20.0, -10.0, 0.7).unwrap().sentence();
+        assert!(s.contains("-20.0 against their -10.0 (below it, `eval.bc_warning`)"), "{s}");
     }
 }

@@ -69,7 +69,7 @@ pub enum Command {
     /// Train a policy on the ground-truth reward.
     #[command(subcommand)]
     Train(train::TrainCommand),
-    /// Evaluate a saved policy: ground-truth return of its stochastic policy.
+    /// Evaluate a saved policy: ground-truth return of its stochastic policy (or, --mean, its mean action).
     Eval(train::EvalArgs),
     /// Run or inspect a pipeline file.
     #[command(subcommand)]

@@ -284,7 +284,11 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     }
     if args.format == PlanFormat::Text {
         // What is left, estimated from the store's own stage times (see pipeline::schedule).
-        let est = crate::pipeline::schedule::Estimates::from_manifests(&store.unverified_manifests().unwrap_or_default());
+        let manifests = store.unverified_manifests().unwrap_or_default();
+        for line in crate::pipeline::gaps::lines(&crate::pipeline::gaps::clone_gaps(&g, &manifests, p.spec.eval.bc_warning)) {
+            println!("{line}");
+        }
+        let est = crate::pipeline::schedule::Estimates::from_manifests(&manifests);
         let cost = |n: &crate::pipeline::Node| if stored(&keys[&n.name]) { 0.0 } else { est.seconds(n) };
         let (path, cp) = crate::pipeline::schedule::critical_path(&g, &cost);
         let total: f64 = g.nodes.iter().map(cost).sum();
@@ -374,6 +378,12 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true, test_set };
     println!("{}", intent(&p, &manifests, &g, &opts));
+    let warn_gaps = |manifests: &[crate::store::Manifest]| {
+        for line in crate::pipeline::gaps::lines(&crate::pipeline::gaps::clone_gaps(&g, manifests, p.spec.eval.bc_warning)) {
+            println!("{line}");
+        }
+    };
+    warn_gaps(&manifests);
     let started = std::time::Instant::now();
     let body = |n: &crate::pipeline::Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
     let outcomes = runner::run(&g, &store, &opts, &body)?;
@@ -390,6 +400,9 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         count(&|s| matches!(s, Status::Skipped { .. })),
         started.elapsed().as_secs_f64()
     );
+    if outcomes.iter().any(|o| matches!(o.status, Status::Computed { .. })) {
+        warn_gaps(&store.unverified_manifests()?);
+    }
     if store.retried() > 0 {
         println!("{}: {} requests retried (each is in the log above)", store.location(), store.retried());
     }

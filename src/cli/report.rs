@@ -40,6 +40,10 @@ pub struct ReportArgs {
     /// A Rerun recording the HTML page links to (repeatable).
     #[arg(long, value_name = "FILE.rrd")]
     pub recording: Vec<PathBuf>,
+    /// The answer warns where BC ends below this fraction of its demonstrations' average
+    /// return (a pipeline file's `eval.bc_warning`).
+    #[arg(long, default_value_t = crate::algo::scoring::BC_WARNING)]
+    pub bc_warning: f64,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -62,7 +66,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         tracing::info!("{}: {added} artifacts not in the store", a.display());
     }
     let building = crate::log::progress::Activity::start("report: tables, intervals and figures");
-    let t = crate::report::build(&store)?;
+    let mut t = crate::report::build(&store)?;
+    t.bc_warning = args.bc_warning;
     if t.returns.is_empty() {
         bail!(
             "{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)",

@@ -54,6 +54,9 @@ pub struct EvalArgs {
     pub env: Option<String>,
     #[arg(long)]
     pub json: bool,
+    /// Act with the policy's mean action instead of sampling.
+    #[arg(long)]
+    pub mean: bool,
 }
 
 pub fn run(cmd: &TrainCommand) -> anyhow::Result<()> {
@@ -124,12 +127,12 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{} does not name its environment; pass --env", args.policy.display()))?;
     let id: EnvId = name.parse()?;
     let evaluating = crate::log::progress::Activity::start(format!("eval: {} episodes of {id}", args.episodes));
-    let stats = ppo::evaluate(&policy, id, args.episodes, args.seed)?;
+    let stats = ppo::evaluate(&policy, id, args.episodes, args.seed, args.mean)?;
     drop(evaluating);
     if args.json {
         println!(
             "{}",
-            serde_json::json!({"env": id.name(), "policy": args.policy, "mean": stats.mean, "std": stats.std, "min": stats.min, "max": stats.max, "episodes": stats.episodes})
+            serde_json::json!({"env": id.name(), "policy": args.policy, "acting": if args.mean { "mean" } else { "sampled" }, "mean": stats.mean, "std": stats.std, "min": stats.min, "max": stats.max, "episodes": stats.episodes})
         );
     } else {
         println!(

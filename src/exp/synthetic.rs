@@ -62,7 +62,7 @@ pub fn manifests(studies: usize, replicates: usize, salt: u64) -> Vec<Manifest> 
             let tag = format!("{s}-{r}-{salt}");
             let seed = 1000 * r as u64;
             let demos = format!("demos-{r}-{salt}");
-            let dp = Params::Demos(DemosParams { env: EnvId::Hopper, episodes: 2 });
+            let dp = Params::Demos(DemosParams { env: EnvId::Hopper, episodes: 2, acting: Default::default(), noise_scale: 1.0 });
             let returns = vec![1000.0, 1100.0];
             out.push(manifest(demos.clone(), dp.kind().name(), dp.to_json(), Metrics::Demos(summary(returns)).to_json(), seed, &[]));
             let bc = format!("bc-{r}-{salt}");

@@ -102,7 +102,12 @@ mod tests {
         };
         let t = Node {
             name: "t".into(),
-            params: Params::Demos(stage::demos::DemosParams { env: crate::env::EnvId::Hopper, episodes: 1 }),
+            params: Params::Demos(stage::demos::DemosParams {
+                env: crate::env::EnvId::Hopper,
+                episodes: 1,
+                acting: Default::default(),
+                noise_scale: 1.0,
+            }),
             seed: 0,
             inputs: stage::Inputs::Demos(stage::DemosInputs { policy: "demonstrator".into() }),
         };

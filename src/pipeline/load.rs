@@ -238,6 +238,24 @@ impl Pipeline {
         if spec.ppo.backend == Backend::Tch {
             bad(&["ppo", "backend"], TCH_BACKEND.into());
         }
+        if !(spec.eval.bc_warning.is_finite() && (0.0..=1.0).contains(&spec.eval.bc_warning)) {
+            bad(
+                &["eval", "bc_warning"],
+                format!("eval.bc_warning {} is not a fraction; give one in [0, 1], e.g. 0.7", spec.eval.bc_warning),
+            );
+        }
+        if !(spec.demos.noise_scale.is_finite() && spec.demos.noise_scale >= 0.0) {
+            bad(
+                &["demos", "noise_scale"],
+                format!("demos.noise_scale {} is not a scale; give a number of at least 0, e.g. 0.3", spec.demos.noise_scale),
+            );
+        }
+        if spec.demos.from.is_some() && !spec.demos.acting.is_sampled() {
+            bad(
+                &["demos", "acting"],
+                "demos.acting says how idrex's demonstrator acts, but demos.from imports the demonstrations; remove one".into(),
+            );
+        }
         if spec.idrex.rollouts_per_level == 0 || spec.idrex.multi_bc_rollouts_per_level == 0 {
             bad(&["idrex"], "idrex rollouts per level must be at least 1".into());
         }
@@ -446,6 +464,11 @@ mod tests {
         assert_eq!(err("version: 1\nenv: Hopper-v5\nmethods: [\"drex\\nx\"]\n").lines().count(), 1);
         assert!(err("version: 1\nenv: Hopper-v5\niterations: 2075\n").contains("p.yaml:3:1: iterations is 2075; give at most 10"));
         assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  backend: tch\n").contains("p.yaml:4:3: ppo.backend tch"));
+        assert!(
+            err("version: 1\nenv: Hopper-v5\neval:\n  bc_warning: 70\n").starts_with("p.yaml:4:3: eval.bc_warning 70 is not a fraction")
+        );
+        assert!(err("version: 1\nenv: Hopper-v5\ndemos:\n  acting: mean\n  from: x.npz\n").contains("p.yaml:4:3: demos.acting says how"));
+        assert!(err("version: 1\nenv: Hopper-v5\ndemos:\n  acting: noisy\n").contains("unknown variant `noisy`"));
         assert!(err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      backend: tch\n").contains("ppo.backend tch"));
         assert_eq!(
             err("version: 1\nenv: Hopper-v9\n"),

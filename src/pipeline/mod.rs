@@ -7,9 +7,11 @@
 //! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
 //! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG),
 //! [`schedule`] and [`cores`] (ordering and threads), [`test_set`] (locked test sets),
-//! [`runner`], [`slurm`], [`recompute`] and [`plots`].
+//! [`gaps`] (BC far below its demonstrations), [`runner`], [`slurm`], [`recompute`] and
+//! [`plots`].
 pub mod config;
 pub mod cores;
+pub mod gaps;
 pub mod graph;
 pub mod inputs;
 pub mod kind;

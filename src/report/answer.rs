@@ -11,6 +11,7 @@ use super::improvement::improvement_cell;
 use super::looks::LookRow;
 use super::studies::{Against, AggregateRow, ImprovementRow, find};
 use super::{Protocol, ProtocolRow, num};
+use crate::algo::scoring::CloneGap;
 use crate::pipeline::Method;
 use crate::stats::{Verdict, WinCount, mean, sign_test_p};
 
@@ -136,6 +137,7 @@ pub fn markdown(
     improvement: &[ImprovementRow],
     demos: &BTreeMap<(String, String), Vec<f64>>,
     looks: &[LookRow],
+    bc_warning: f64,
 ) -> String {
     // A study whose seeds were looked at more than once, or that reused a test set, says so.
     let caveat = |env: &str, study: &str| {
@@ -164,6 +166,9 @@ pub fn markdown(
             num(Some(bc.stats.mean)),
             num(Some(demo))
         ));
+        if let Some(gap) = CloneGap::check(bc.stats.mean, demo, bc_warning) {
+            out.push_str(&format!("**{}**\n\n", gap.sentence()));
+        }
         let (mut both, mut avg, mut below) = (vec![], vec![], vec![]);
         for r in rows.iter().filter(|r| r.method != Method::Bc.name()) {
             let m = r.stats.mean;
@@ -216,6 +221,23 @@ pub fn markdown(
             caveat(env, study),
             num(Some(bc.mean))
         ));
+        // Per replicate: its BC against its own demonstrations (table `study/rK`; replicate 0's
+        // is the study's own name, its keys those of a file without replicates).
+        let demos_of = |rep: usize| {
+            let table = |name: String| demos.get(&(env.to_string(), name));
+            table(format!("{study}/r{rep}")).or_else(|| if rep == 0 { table(study.to_string()) } else { None }).and_then(|d| mean(d))
+        };
+        let gaps: Vec<CloneGap> =
+            bc.scores.iter().filter_map(|&(rep, b)| demos_of(rep).and_then(|d| CloneGap::check(b, d, bc_warning))).collect();
+        if !gaps.is_empty() {
+            let worst = gaps.iter().min_by(|a, b| (a.bc - a.demos).total_cmp(&(b.bc - b.demos))).expect("not empty");
+            out.push_str(&format!(
+                "**On {} of {} replicates {}**\n\n",
+                gaps.len(),
+                bc.scores.len(),
+                worst.sentence().replacen("BC ends", "BC ends (the widest gap)", 1)
+            ));
+        }
         let (mut both, mut avg, mut below) = (vec![], vec![], vec![]);
         for r in rows.iter().filter(|r| r.method != Method::Bc.name()) {
             let bc_of: BTreeMap<usize, f64> = bc.scores.iter().copied().collect();
@@ -295,7 +317,7 @@ mod tests {
             (capitalise("iD-REX multi-BC is"), capitalise("d-REX is"), capitalise("")),
             ("iD-REX multi-BC is".into(), "D-REX is".into(), String::new())
         );
-        let md = markdown(&rows, &[], &[], &demos, &[]);
+        let md = markdown(&rows, &[], &[], &demos, &[], 0.7);
         assert!(md.starts_with("## The answer\n\n### Hopper-v5, p\n"), "{md}");
         assert!(md.contains("BC 100.0; the demonstrations 150.0 (average)"), "{md}");
         assert!(md.contains("| D-REX | 300.0 [250.0, 350.0] | +200.0, interval above | +150.0, interval above |"), "{md}");
@@ -308,9 +330,12 @@ mod tests {
             "{md}"
         );
         assert!(md.contains("iD-REX action noise is not above both. These are 3 RL runs on one seed set"), "{md}");
+        // BC at 67 % of its demonstrations: under a 0.7 threshold the answer says so first.
+        assert!(md.contains("**BC ends far below its demonstrations: 100.0 against their 150.0 (67 % of it"), "{md}");
+        assert!(!markdown(&rows, &[], &[], &demos, &[], 0.6).contains("far below"));
         // Without BC or the demonstrations there is nothing to answer against.
-        assert_eq!(markdown(&rows[1..], &[], &[], &demos, &[]), "");
-        assert_eq!(markdown(&rows, &[], &[], &BTreeMap::new(), &[]), "");
+        assert_eq!(markdown(&rows[1..], &[], &[], &demos, &[], 0.7), "");
+        assert_eq!(markdown(&rows, &[], &[], &BTreeMap::new(), &[], 0.7), "");
     }
 
     /// Ten replicates: multi-BC above D-REX on 9 decides; K = 3 against K = 2, tied on four
@@ -334,11 +359,20 @@ mod tests {
             rows.push(replicate("s", r, "idrex-multi-bc (k=3)", &[k3]));
         }
         let (agg, imp) = aggregate(&rows, &BTreeMap::new());
-        let md = markdown(&rows, &agg, &imp, &BTreeMap::new(), &[]);
+        let md = markdown(&rows, &agg, &imp, &BTreeMap::new(), &[], 0.7);
         assert!(md.contains("iD-REX multi-BC beats D-REX (P 0.90 ["), "{md}");
         assert!(md.contains("above on 9 of 10 replicates, p = 0.011)"), "{md}");
         assert!(md.contains("iD-REX multi-BC (k=3) shows no difference from K - 1 (P "), "{md}");
         assert!(md.contains("above on 3 of 10 replicates, 4 tied, p = 0.656)"), "{md}");
         assert!(!md.contains("BC shows") && !md.contains("BC is beaten"), "BC is no learned-reward method: {md}");
+        assert!(!md.contains("far below"), "no demonstrations, no warning: {md}");
+        // Each replicate's BC against its own demonstrations: replicate 0's table is the study's name.
+        let key = |t: &str| ("Hopper-v5".to_string(), t.to_string());
+        let demos = BTreeMap::from([(key("s"), vec![200.0]), (key("s/r1"), vec![120.0]), (key("s/r2"), vec![300.0])]);
+        let md = markdown(&rows, &agg, &imp, &demos, &[], 0.7);
+        assert!(
+            md.contains("**On 2 of 10 replicates BC ends (the widest gap) far below its demonstrations: 100.0 against their 300.0"),
+            "{md}"
+        );
     }
 }

@@ -275,6 +275,9 @@ pub struct Tables {
     pub demo_returns: BTreeMap<(String, String), Vec<f64>>,
     /// How often each study's seeds were looked at.
     pub looks: Vec<looks::LookRow>,
+    /// The answer warns where BC ends below this fraction of its demonstrations' average
+    /// ([`crate::algo::scoring::CloneGap`]).
+    pub bc_warning: f64,
 }
 
 impl Tables {
@@ -408,6 +411,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         clones: clones::rows(store),
         demo_returns: long.demo_returns,
         looks: looks::rows(store),
+        bc_warning: crate::algo::scoring::BC_WARNING,
     })
 }
 

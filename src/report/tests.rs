@@ -52,7 +52,7 @@ fn store() -> Artifacts {
     for r in [1usize, 2] {
         let base = 100.0 * r as f64;
         let demos = format!("demos{r}");
-        let dp = Params::Demos(DemosParams { env: EnvId::Hopper, episodes: 2 });
+        let dp = Params::Demos(DemosParams { env: EnvId::Hopper, episodes: 2, acting: Default::default(), noise_scale: 1.0 });
         add(manifest(&demos, &dp, &Metrics::Demos(summary(&[950.0 + base, 1050.0 + base])), &[]));
         let eval = |method, run| EvalParams {
             env: EnvId::Hopper,

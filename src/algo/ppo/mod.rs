@@ -80,6 +80,10 @@ pub struct PpoConfig {
     pub eval_every: usize,
     /// Episodes per evaluation (`eval_every`).
     pub eval_episodes: usize,
+    /// Evaluate the mean action instead of sampling (a demonstrator's stopping target can
+    /// then measure what a deterministic demonstrator shows).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub eval_mean: bool,
     /// Where the minibatch updates run: `fused` (plain Rust, `algo/ppo/fused.rs`); `tch`
     /// (libtorch's autograd) is the tests' reference, refused in pipeline files.
     pub backend: Backend,
@@ -124,6 +128,7 @@ impl Default for PpoConfig {
             threads: 1,
             eval_every: 0,
             eval_episodes: 5,
+            eval_mean: false,
             backend: Backend::Fused,
             checkpoint_every: 20,
             bootstrap_truncation: false,
@@ -312,7 +317,7 @@ pub fn train(
         let resid: Vec<f32> = returns.iter().zip(&buf.values).map(|(r, v)| r - v).collect();
         agent.obs_norm = Some(norm.obs.clone());
         let eval = (cfg.eval_every > 0 && (global_step % cfg.eval_every < batch || update == updates))
-            .then(|| evaluate(&agent, id, cfg.eval_episodes, seed::derive(seed, Purpose::PpoEval, update as u64)))
+            .then(|| evaluate(&agent, id, cfg.eval_episodes, seed::derive(seed, Purpose::PpoEval, update as u64), cfg.eval_mean))
             .transpose()?;
         let progress = PpoProgress {
             global_step,
@@ -416,12 +421,12 @@ fn variance(v: &[f32]) -> f64 {
     v.iter().map(|&x| (x as f64 - m).powi(2)).sum::<f64>() / n
 }
 
-/// Ground-truth returns of `episodes` episodes of the stochastic policy (frozen
-/// normalisation), episode k from a reset seeded with `seed + k`.
-pub fn evaluate(policy: &ActorCritic, id: EnvId, episodes: usize, seed: u64) -> Result<ReturnStats> {
+/// Ground-truth returns of `episodes` episodes of the stochastic policy (or its mean action,
+/// `mean`; frozen normalisation), episode k from a reset seeded with `seed + k`.
+pub fn evaluate(policy: &ActorCritic, id: EnvId, episodes: usize, seed: u64, mean: bool) -> Result<ReturnStats> {
     let mut env = Env::new(id)?;
     policy.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
-    let mut actor = PolicyActor::new(policy.to_cpu(), true);
+    let mut actor = PolicyActor::new(policy.to_cpu(), !mean);
     let returns: Vec<f64> =
         (0..episodes).map(|k| rollout::episode(&mut env, &mut actor, seed.wrapping_add(k as u64), TrajMeta::default()).ret()).collect();
     Ok(ReturnStats::of(&returns))
@@ -443,7 +448,7 @@ mod tests {
         };
         let cfg = PpoConfig { total_steps: 40_960, num_envs: 2, num_steps: 1024, ..Default::default() };
         let res = train(EnvId::Hopper, &cfg, RewardSource::GroundTruth, 0, &mut |_| true, None).unwrap();
-        let trained = evaluate(&res.policy, EnvId::Hopper, 20, 123).unwrap();
+        let trained = evaluate(&res.policy, EnvId::Hopper, 20, 123, false).unwrap();
         assert!(trained.mean > 3.0 * random && trained.mean > 150.0, "trained {trained:?} vs random {random}");
     }
 

@@ -11,6 +11,7 @@ use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::EnvId;
 use crate::nn::DeviceChoice;
 use crate::nn::reward::{Combine, CtrlAction, RewardLevel};
+use crate::rollout::Acting;
 pub use idrex::{CloneConfig, CloneFilter, CloneLabels, CloneSource, IdrexConfig, SourceActing};
 
 pub const SCHEMA_VERSION: u32 = 1;
@@ -75,19 +76,30 @@ pub struct DemonstratorConfig {
     pub target_return: Option<f64>,
     /// Evaluate (5 episodes) every this many steps to check the target.
     pub eval_every: usize,
+    /// The target's evaluation acts with the policy's mean action instead of sampling: the
+    /// return then measures what a demonstrator acting with its mean (`demos.acting: mean`)
+    /// or labelling with it (`sampled-mean-labels`) shows a cloner.
+    pub eval_mean: bool,
 }
 
 impl Default for DemonstratorConfig {
     fn default() -> Self {
-        DemonstratorConfig { steps: 200_000, target_return: None, eval_every: 20_480 }
+        DemonstratorConfig { steps: 200_000, target_return: None, eval_every: 20_480, eval_mean: false }
     }
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct DemosConfig {
-    /// Rollouts of the demonstrator's stochastic policy.
+    /// Rollouts of the demonstrator's policy.
     pub episodes: usize,
+    /// How the demonstrator acts and what its steps record: `sampled` (its Gaussian, as the
+    /// original code), `mean` (its mean action), or `sampled-mean-labels` (acts sampled,
+    /// records the mean: DART's noise with noise-free labels).
+    pub acting: Acting,
+    /// Scales the demonstrator's sampled deviation from its mean action (1: its own standard
+    /// deviation; 0.3 with `sampled-mean-labels` is DART's small noise around the mean).
+    pub noise_scale: f64,
     /// Import instead: an MCAP in idrex's rollout schema or an NPZ with obs, actions,
     /// rewards, episode_lengths; a path relative to the pipeline file, or (for a study over
     /// several environments) a map from environment to path.
@@ -130,7 +142,7 @@ impl Envs {
 
 impl Default for DemosConfig {
     fn default() -> Self {
-        DemosConfig { episodes: 1, from: None }
+        DemosConfig { episodes: 1, acting: Acting::Sampled, noise_scale: 1.0, from: None }
     }
 }
 
@@ -161,11 +173,16 @@ pub struct EvalConfig {
     /// Episodes per policy and per checkpoint (ground-truth reward, stochastic PPO
     /// policies; BC acts with its mean).
     pub episodes: usize,
+    /// Warn (in the run's first and last lines and the report's answer) when BC's return ends
+    /// below this fraction of its demonstrations' average, or below the average where that is
+    /// negative: D-REX's ranking then has nothing near the demonstrations to extrapolate
+    /// from. Not part of any key; `idrex report --bc-warning` sets the report's.
+    pub bc_warning: f64,
 }
 
 impl Default for EvalConfig {
     fn default() -> Self {
-        EvalConfig { episodes: 20 }
+        EvalConfig { episodes: 20, bc_warning: crate::algo::scoring::BC_WARNING }
     }
 }
 

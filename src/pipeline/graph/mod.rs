@@ -186,6 +186,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             let mut ppo = s.ppo.clone();
             ppo.total_steps = s.demonstrator.steps;
             ppo.eval_every = s.demonstrator.eval_every;
+            ppo.eval_mean = s.demonstrator.eval_mean;
             let d = g.push(
                 "demonstrator",
                 Params::Demonstrator(demos::DemonstratorParams { env, ppo, target_return: s.demonstrator.target_return }),
@@ -194,7 +195,12 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             );
             g.push(
                 "demos",
-                Params::Demos(demos::DemosParams { env, episodes: s.demos.episodes }),
+                Params::Demos(demos::DemosParams {
+                    env,
+                    episodes: s.demos.episodes,
+                    acting: s.demos.acting,
+                    noise_scale: s.demos.noise_scale,
+                }),
                 seed0,
                 Inputs::Demos(DemosInputs { policy: d }),
             )

@@ -10,7 +10,7 @@ use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
 use crate::log::mcap;
 use crate::pipeline::inputs::NoInputs;
-use crate::rollout::{self, PolicyActor};
+use crate::rollout::{self, Acting, PolicyActor};
 use crate::seed::Purpose;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -61,6 +61,19 @@ pub fn demonstrator(p: &DemonstratorParams, _: &NoInputs<PathBuf>, ctx: &StageCt
 pub struct DemosParams {
     pub env: EnvId,
     pub episodes: usize,
+    /// How the demonstrator acts and what is recorded; absent (sampled) from the key.
+    #[serde(default, skip_serializing_if = "Acting::is_sampled")]
+    pub acting: Acting,
+    /// Scales the sampled deviation from the mean action; absent (1) from the key.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub noise_scale: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
 }
 
 crate::stage_inputs! {
@@ -68,13 +81,20 @@ crate::stage_inputs! {
     DemosInputs { policy: One Policy }
 }
 
-/// Rollouts of the demonstrator's stochastic policy, episode k from `derive(seed, Episode, k)`.
-
+/// Rollouts of the demonstrator's policy, acting as `acting` says, episode k from
+/// `derive(seed, Episode, k)`.
 pub fn demos(p: &DemosParams, inputs: &DemosInputs<PathBuf>, ctx: &StageCtx) -> Result<RolloutSummary> {
     let mut env = Env::new(p.env)?;
     let policy = load_policy_for(&inputs.policy, &env, p.env)?;
     let meta = TrajMeta { source: "demonstrator".into(), ..Default::default() };
-    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes, ctx.seed, Purpose::Episode, &meta);
+    let trajs = rollout::episodes(
+        &mut env,
+        &mut PolicyActor::with(&policy, p.acting, p.noise_scale),
+        p.episodes,
+        ctx.seed,
+        Purpose::Episode,
+        &meta,
+    );
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(RolloutSummary::of(&trajs))
 }

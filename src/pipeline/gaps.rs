@@ -1,0 +1,30 @@
+//! Where a pipeline's BC ends far below its demonstrations ([`CloneGap`]), read from the
+//! stored manifests of its BC evaluations and the demonstrations they were cloned from: what
+//! `pipeline run` and `pipeline plan` say first, before anything downstream is trusted.
+use std::collections::BTreeMap;
+
+use super::stage::{Inputs, Params};
+use super::{Graph, Method};
+use crate::algo::scoring::CloneGap;
+use crate::store::Manifest;
+
+/// (BC evaluation node, gap) for every stored BC evaluation of `g` below `fraction`.
+pub fn clone_gaps(g: &Graph, manifests: &[Manifest], fraction: f64) -> Vec<(String, CloneGap)> {
+    let keys = g.keys();
+    let by_key: BTreeMap<&str, &Manifest> = manifests.iter().map(|m| (m.key.as_str(), m)).collect();
+    let mean = |node: &str| by_key.get(keys.get(node)?.as_str())?.metrics.get("mean")?.as_f64();
+    g.nodes
+        .iter()
+        .filter_map(|n| match (&n.params, &n.inputs) {
+            (Params::Eval(e), Inputs::Eval(i)) if e.method == Method::Bc => {
+                CloneGap::check(mean(&n.name)?, mean(&i.demos)?, fraction).map(|gap| (n.name.clone(), gap))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// One line per gap, naming the node where the pipeline has several.
+pub fn lines(gaps: &[(String, CloneGap)]) -> Vec<String> {
+    gaps.iter().map(|(node, gap)| format!("warning: {}: {}", node.trim_end_matches("/eval"), gap.sentence())).collect()
+}
