@@ -122,6 +122,10 @@ print("ok", len(sys.argv) - 1)
     // multi-BC's clone filter kept.
     assert!(md.contains(" episodes) |"), "{md}");
     assert!(md.contains("## Notes") && md.contains("held-out training pairs") && md.contains("the clone filter kept"), "{md}");
+    // The smoke file turns the clone filter off, so no clone's fidelity is measured: the notes
+    // say so, and no table or sentence prints NaN.
+    assert!(md.contains("their fidelity was not measured (no clone filter scores them"), "{md}");
+    assert!(!md.contains("NaN"), "{md}");
     // Multi-BC's clones joined its ranked set (the smoke file keeps every clone), so its reward
     // saw rankings of its own and its results are not D-REX's; every clone is in clones.csv
     // with its fidelity.

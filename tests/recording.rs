@@ -115,6 +115,6 @@ fn every_view_shows_its_data_and_legends_give_way() {
     let titles = check_layout(&path, |t| !t.contains("legend hidden"));
     assert_eq!(titles.len(), 3, "{titles:?}");
     let ppo = titles.iter().find(|t| t.contains("PPO")).unwrap();
-    assert!(ppo.starts_with("15 series, legend hidden"), "{ppo}");
+    assert_eq!(ppo, "PPO training episodes (15 series, legend hidden: hover a point)", "what it plots first");
     assert!(titles.iter().filter(|t| t.contains("legend hidden")).count() == 1, "{titles:?}");
 }

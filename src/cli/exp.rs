@@ -110,6 +110,9 @@ pub fn run(cmd: &ExpCommand) -> anyhow::Result<()> {
                 columns: args.columns.clone(),
             };
             print!("{}", show::table(&all, &sel).write(args.out.format()));
+            if let Some(hint) = show::hint(&all, &sel).filter(|_| !args.out.table.machine()) {
+                println!("{hint}");
+            }
         }
         ExpCommand::Diff(args) => {
             let all = args.out.studies()?;

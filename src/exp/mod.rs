@@ -200,7 +200,7 @@ pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
 pub fn changed(studies: &[&Study]) -> Vec<String> {
     let keys: BTreeSet<&String> = studies.iter().flat_map(|s| s.config.keys()).collect();
     keys.into_iter()
-        .filter(|k| studies.len() < 2 || studies.iter().map(|s| s.config.get(*k)).collect::<BTreeSet<_>>().len() > 1)
+        .filter(|k| studies.iter().map(|s| s.config.get(*k)).collect::<BTreeSet<_>>().len() > 1)
         .cloned()
         .collect()
 }

@@ -96,6 +96,14 @@ pub fn table(studies: &[Study], sel: &Selection) -> Table {
     t
 }
 
+/// What the table leaves out where nothing is compared: with one study listed no parameter
+/// differs, so none is shown, and this says how to see them.
+pub fn hint(studies: &[Study], sel: &Selection) -> Option<String> {
+    let listed = studies.iter().filter(|s| sel.envs.is_empty() || sel.envs.iter().any(|e| s.envs.contains(e))).count();
+    (listed == 1 && !sel.all_params)
+        .then(|| "one study, nothing to compare: its parameters are left out; `--all-params` lists them, `--columns NAME` picks some".into())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,5 +127,13 @@ mod tests {
         assert!(none.rows.is_empty());
         let two = table(&all, &Selection { protocols: vec![Protocol::Final, Protocol::BestByGroundTruth], ..Selection::default() });
         assert!(two.columns.contains(&"Hopper-v5 drex (best-by-ground-truth)".to_string()));
+        assert!(hint(&all, &Selection::default()).is_none(), "three studies are compared");
+        // One study: the headline columns only, and a hint; --all-params still lists them all.
+        let one = table(&all[..1], &Selection::default());
+        assert!(one.columns.iter().all(|c| !c.contains('.')), "no parameter column: {:?}", one.columns);
+        assert!(one.columns.contains(&"Hopper-v5 drex".to_string()));
+        assert!(hint(&all[..1], &Selection::default()).is_some_and(|h| h.contains("--all-params")));
+        assert!(hint(&all[..1], &Selection { all_params: true, ..Selection::default() }).is_none());
+        assert!(table(&all[..1], &Selection { all_params: true, ..Selection::default() }).columns.contains(&"ppo.ppo.lr".to_string()));
     }
 }

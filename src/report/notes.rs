@@ -35,13 +35,16 @@ pub fn notes(store: &Artifacts) -> Result<String> {
                 && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
             {
                 let kept = x.kept();
-                let fidelity: Vec<String> = x.clones.iter().map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
-                let mut line = format!(
-                    "{}: the clone filter kept {kept} of {} clones; their fidelity (true return, random 0, source 1) {}",
-                    sm.node,
-                    x.clones.len(),
-                    fidelity.join(", ")
-                );
+                let measured: Vec<String> =
+                    x.clones.iter().filter(|c| c.fidelity.normalised.is_finite()).map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
+                let fidelity = if measured.is_empty() {
+                    "was not measured (no clone filter scores them: `idrex.multi_bc_filter: none`)".to_string()
+                } else if measured.len() < x.clones.len() {
+                    format!("(true return, random 0, source 1) {} for {} of them; the rest not measured", measured.join(", "), measured.len())
+                } else {
+                    format!("(true return, random 0, source 1) {}", measured.join(", "))
+                };
+                let mut line = format!("{}: the clone filter kept {kept} of {} clones; their fidelity {fidelity}", sm.node, x.clones.len());
                 if kept == 0 {
                     line.push_str("; with none kept, this iteration's reward saw no rankings the previous one's had not, so its figures repeat the previous iteration's (D-REX's, at the first)");
                 }
