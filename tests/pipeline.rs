@@ -74,7 +74,7 @@ fn smoke_pipeline_end_to_end() {
     // view has many series), and every plotted row has the one plot timeline, `x`.
     let p = Command::new(&rerun).args(["rrd", "print", "-vv", rec.to_str().unwrap()]).output().unwrap();
     assert!(stdout(&p).contains("ViewportBlueprint:auto_views"), "the recording has no blueprint");
-    let views = crate::recording::check_layout(&rec, |t| !t.contains("legend hidden"));
+    let views = crate::recording::check_layout(&rec, |t| !t.contains(" series, legend"));
     assert_eq!(views.len(), 7, "one plot view per figure (multi-BC's clones among them): {views:?}");
     assert!(views.iter().any(|v| v.contains("Multi-BC clones")), "{views:?}");
 
@@ -652,9 +652,9 @@ fn a_study_split_over_two_files_reports_its_replicates() {
     // The recording of a file with two replicates has a view of each replicate's final
     // returns, one series (a point per replicate) per method; its layout holds like any
     // recording's. The second file holds one replicate: no such view.
-    let views = crate::recording::check_layout(&dir.join("a.rrd"), |t| !t.contains("legend hidden"));
+    let views = crate::recording::check_layout(&dir.join("a.rrd"), |t| !t.contains(" series, legend"));
     assert!(views.iter().any(|v| v.contains("Each replicate's final policy")), "{views:?}");
-    let single = crate::recording::check_layout(&dir.join("b.rrd"), |t| !t.contains("legend hidden"));
+    let single = crate::recording::check_layout(&dir.join("b.rrd"), |t| !t.contains(" series, legend"));
     assert!(!single.iter().any(|v| v.contains("Each replicate's")), "{single:?}");
     let printed = crate::recording::printed(&dir.join("a.rrd"));
     let methods: Vec<&String> = printed.keys().filter(|e| e.starts_with("/replicates/")).collect();

@@ -112,7 +112,7 @@ fn every_view_shows_its_data_and_legends_give_way() {
     .unwrap();
     rec.finish(&path).unwrap();
     assert!(15 > LEGEND_MAX);
-    let titles = check_layout(&path, |t| !t.contains("legend hidden"));
+    let titles = check_layout(&path, |t| !t.contains(" series, legend"));
     assert_eq!(titles.len(), 3, "{titles:?}");
     let ppo = titles.iter().find(|t| t.contains("PPO")).unwrap();
     assert_eq!(ppo, "PPO training episodes (15 series, legend hidden: hover a point)", "what it plots first");

@@ -285,9 +285,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     if args.format == PlanFormat::Text {
         // What is left, estimated from the store's own stage times (see pipeline::schedule).
         let manifests = store.unverified_manifests().unwrap_or_default();
-        for line in crate::pipeline::gaps::lines(&crate::pipeline::gaps::clone_gaps(&g, &manifests, p.spec.eval.bc_warning)) {
-            println!("{line}");
-        }
+        crate::pipeline::gaps::print(&g, &manifests, p.spec.eval.bc_warning);
         let est = crate::pipeline::schedule::Estimates::from_manifests(&manifests);
         let cost = |n: &crate::pipeline::Node| if stored(&keys[&n.name]) { 0.0 } else { est.seconds(n) };
         let (path, cp) = crate::pipeline::schedule::critical_path(&g, &cost);
@@ -378,12 +376,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true, test_set };
     println!("{}", intent(&p, &manifests, &g, &opts));
-    let warn_gaps = |manifests: &[crate::store::Manifest]| {
-        for line in crate::pipeline::gaps::lines(&crate::pipeline::gaps::clone_gaps(&g, manifests, p.spec.eval.bc_warning)) {
-            println!("{line}");
-        }
-    };
-    warn_gaps(&manifests);
+    crate::pipeline::gaps::print(&g, &manifests, p.spec.eval.bc_warning);
     let started = std::time::Instant::now();
     let body = |n: &crate::pipeline::Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
     let outcomes = runner::run(&g, &store, &opts, &body)?;
@@ -420,7 +413,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
         && outcomes.iter().any(|o| matches!(o.status, Status::Computed { .. }))
         && let Ok(m) = store.unverified_manifests()
     {
-        warn_gaps(&m);
+        crate::pipeline::gaps::print(&g, &m, p.spec.eval.bc_warning);
     }
     // One recording per environment: each env's nodes under their names within it.
     let mut recordings = Vec::new();

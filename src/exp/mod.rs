@@ -199,10 +199,7 @@ pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
 /// The parameters whose values differ between `studies` (all of them with one study).
 pub fn changed(studies: &[&Study]) -> Vec<String> {
     let keys: BTreeSet<&String> = studies.iter().flat_map(|s| s.config.keys()).collect();
-    keys.into_iter()
-        .filter(|k| studies.iter().map(|s| s.config.get(*k)).collect::<BTreeSet<_>>().len() > 1)
-        .cloned()
-        .collect()
+    keys.into_iter().filter(|k| studies.iter().map(|s| s.config.get(*k)).collect::<BTreeSet<_>>().len() > 1).cloned().collect()
 }
 
 /// `unix` seconds as `YYYY-MM-DD HH:MM` UTC.

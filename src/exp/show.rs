@@ -100,8 +100,9 @@ pub fn table(studies: &[Study], sel: &Selection) -> Table {
 /// differs, so none is shown, and this says how to see them.
 pub fn hint(studies: &[Study], sel: &Selection) -> Option<String> {
     let listed = studies.iter().filter(|s| sel.envs.is_empty() || sel.envs.iter().any(|e| s.envs.contains(e))).count();
-    (listed == 1 && !sel.all_params)
-        .then(|| "one study, nothing to compare: its parameters are left out; `--all-params` lists them, `--columns NAME` picks some".into())
+    (listed == 1 && !sel.all_params).then(|| {
+        "one study, nothing to compare: its parameters are left out; `--all-params` lists them, `--columns NAME` picks some".into()
+    })
 }
 
 #[cfg(test)]

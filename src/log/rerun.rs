@@ -165,7 +165,8 @@ impl Recording {
             let (class, title, origin, query) = match panel {
                 Panel::Plot { title, root } => {
                     let n = counts.get(&root).copied().unwrap_or(0);
-                    // What the panel plots first: the viewer cuts a long title off at its end.
+                    // What the panel plots first: the viewer (and `rerun rrd print`) cut a long title
+                    // off at its end.
                     let title = if n > LEGEND_MAX { format!("{title} ({n} series, legend hidden: hover a point)") } else { title };
                     let (legend_visible, corner) = (n <= LEGEND_MAX, Corner2D::LeftTop);
                     // The x axis spans this view's data (Rerun's default is a window around

@@ -24,7 +24,14 @@ pub fn clone_gaps(g: &Graph, manifests: &[Manifest], fraction: f64) -> Vec<(Stri
         .collect()
 }
 
-/// One line per gap, naming the node where the pipeline has several.
+/// One line per gap, naming the BC node.
 pub fn lines(gaps: &[(String, CloneGap)]) -> Vec<String> {
     gaps.iter().map(|(node, gap)| format!("warning: {}: {}", node.trim_end_matches("/eval"), gap.sentence())).collect()
+}
+
+/// Prints [`lines`] of `g`'s gaps on stdout (what `pipeline run` and `plan` say).
+pub fn print(g: &Graph, manifests: &[Manifest], fraction: f64) {
+    for line in lines(&clone_gaps(g, manifests, fraction)) {
+        println!("{line}");
+    }
 }

@@ -35,12 +35,20 @@ pub fn notes(store: &Artifacts) -> Result<String> {
                 && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
             {
                 let kept = x.kept();
-                let measured: Vec<String> =
-                    x.clones.iter().filter(|c| c.fidelity.normalised.is_finite()).map(|c| format!("{:.2}", c.fidelity.normalised)).collect();
+                let measured: Vec<String> = x
+                    .clones
+                    .iter()
+                    .filter(|c| c.fidelity.normalised.is_finite())
+                    .map(|c| format!("{:.2}", c.fidelity.normalised))
+                    .collect();
                 let fidelity = if measured.is_empty() {
                     "was not measured (no clone filter scores them: `idrex.multi_bc_filter: none`)".to_string()
                 } else if measured.len() < x.clones.len() {
-                    format!("(true return, random 0, source 1) {} for {} of them; the rest not measured", measured.join(", "), measured.len())
+                    format!(
+                        "(true return, random 0, source 1) {} for {} of them; the rest not measured",
+                        measured.join(", "),
+                        measured.len()
+                    )
                 } else {
                     format!("(true return, random 0, source 1) {}", measured.join(", "))
                 };
