@@ -3,7 +3,7 @@
 //! `pipeline run` and `pipeline plan` say first, before anything downstream is trusted.
 use std::collections::BTreeMap;
 
-use super::stage::{Inputs, Params};
+use super::stage::{Inputs, Metrics, Params, Typed};
 use super::{Graph, Method};
 use crate::algo::scoring::CloneGap;
 use crate::store::Manifest;
@@ -12,7 +12,12 @@ use crate::store::Manifest;
 pub fn clone_gaps(g: &Graph, manifests: &[Manifest], fraction: f64) -> Vec<(String, CloneGap)> {
     let keys = g.keys();
     let by_key: BTreeMap<&str, &Manifest> = manifests.iter().map(|m| (m.key.as_str(), m)).collect();
-    let mean = |node: &str| by_key.get(keys.get(node)?.as_str())?.metrics.get("mean")?.as_f64();
+    // The mean return of a node's stored evaluation or demonstrations, read typed.
+    let mean = |node: &str| match Typed::of(by_key.get(keys.get(node)?.as_str())?).ok()?.metrics {
+        Metrics::Eval(e) => Some(e.summary.stats.mean),
+        Metrics::Demos(d) | Metrics::DemosImport(d) => Some(d.stats.mean),
+        _ => None,
+    };
     g.nodes
         .iter()
         .filter_map(|n| match (&n.params, &n.inputs) {
