@@ -233,6 +233,52 @@ print("ok")
     let table = out_dir.join("protocols.csv");
     let args = [store.to_str().unwrap(), table.to_str().unwrap()];
     assert_eq!(py(protocols_check, &args).trim(), "ok");
+    // How each method earns its return: terms.csv's return is returns.csv's mean and the sum of
+    // its terms; the SSRR-way correlation is Pearson over the reward's ranked set, the
+    // demonstrations and the final policies' episodes, recomputed here from the manifests.
+    let terms_check = r#"
+import csv, json, os, sys
+store, out = sys.argv[1], sys.argv[2]
+read = lambda name: list(csv.DictReader(open(os.path.join(out, name))))
+means = {(r["env"], r["pipeline"], r["method"]): float(r["mean"]) for r in read("returns.csv")}
+terms = read("terms.csv")
+assert len(terms) == len(means) == 5, (len(terms), len(means))
+for r in terms:
+    total = sum(float(r[c]) for c in ("forward", "ctrl", "survive", "contact"))
+    assert abs(total - float(r["return"])) < 1e-6 * max(1.0, abs(total)), r
+    assert abs(float(r["return"]) - means[(r["env"], r["pipeline"], r["method"])]) < 1e-6, r
+    assert r["earned_by"] in ("moving", "living") and float(r["survive"]) > 0, r
+    assert (r["learned_per_step"] == "") == (r["method"] == "bc") == (r["ranked_best_per_step"] == ""), r
+ms = {}
+for d in os.listdir(store):
+    if not d.startswith("."):
+        m = json.load(open(os.path.join(store, d, "manifest.json")))
+        ms[m["key"]] = m
+def pearson(x, y):
+    n = len(x); mx, my = sum(x) / n, sum(y) / n
+    cov = sum((a - mx) * (b - my) for a, b in zip(x, y))
+    return cov / (sum((a - mx) ** 2 for a in x) * sum((b - my) ** 2 for b in y)) ** 0.5
+evals = [m for m in ms.values() if m["kind"] == "eval" and "reward" in m["inputs"]]
+pool = {}
+for m in evals:
+    p, t = pool.setdefault(m["inputs"]["reward"], ([], []))
+    p += m["metrics"]["predicted_returns"]
+    t += m["metrics"]["returns"]
+want = {}
+for m in evals:
+    k = m["inputs"]["reward"]
+    x = ms[k]["metrics"]
+    pred = x["train_set"]["predicted"] + x["demos"]["predicted"] + pool[k][0]
+    true = x["train_set"]["true"] + x["demos"]["true"] + pool[k][1]
+    want.setdefault((m["params"]["env"], m["params"]["pipeline"], m["params"]["method"]), []).append(pearson(pred, true))
+rows = read("reward_accuracy.csv")
+assert len(rows) == len(want) == 4, rows
+for r in rows:
+    v = want[(r["env"], r["pipeline"], r["method"])]
+    assert abs(float(r["pearson_ssrr"]) - sum(v) / len(v)) < 1e-9, (r, v)
+print("ok")
+"#;
+    assert_eq!(py(terms_check, &[store.to_str().unwrap(), out_dir.to_str().unwrap()]).trim(), "ok");
     assert!(md.contains("SELECTED WITH THE GROUND-TRUTH REWARD"), "{md}");
 
     // An archive of the stages' manifests rebuilds the same report, figures and all, with no

@@ -119,7 +119,15 @@ fn hidden_layer_gflops() -> (f64, f64, f64) {
 /// libtorch's forward pass on the same networks and rows.
 fn reward_inference_rates() -> (f64, f64) {
     use crate::nn::reward::{RewardConfig, RewardEnsemble};
-    let config = RewardConfig { obs_dim: 17, act_dim: None, hidden: vec![256, 256], models: 3, clip: 100.0, init: Default::default() };
+    let config = RewardConfig {
+        obs_dim: 17,
+        obs_stride: None,
+        act_dim: None,
+        hidden: vec![256, 256],
+        models: 3,
+        clip: 100.0,
+        init: Default::default(),
+    };
     let model = crate::nn::seeded(0, || RewardEnsemble::new(config));
     let rows = 2048;
     let obs: Vec<f32> = (0..rows * 17).map(|i| (i as f32 * 0.37).sin()).collect();

@@ -56,6 +56,7 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<serde_json::Value> {
         let env = Env::new(args.env)?;
         let config = RewardConfig {
             obs_dim: env.obs_dim(),
+            obs_stride: None,
             act_dim: None,
             hidden: vec![256, 256],
             models: 3,

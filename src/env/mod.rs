@@ -23,11 +23,13 @@ use crate::error::{Error, Result};
 pub mod ant;
 pub mod half_cheetah;
 pub mod hopper;
+mod horizon;
 pub mod replay;
 mod spec;
 pub mod vec_env;
 pub mod walker2d;
 
+pub use horizon::Horizon;
 pub use spec::{Contact, EnvSpec, Forward, Health, ResetNoise};
 pub use vec_env::{VecEnv, VecStep};
 
@@ -154,6 +156,7 @@ pub struct Env {
     action_high: Vec<f64>,
     dt: f64,
     elapsed: usize,
+    horizon: Horizon,
     rng: ChaCha8Rng,
 }
 
@@ -184,8 +187,19 @@ impl Env {
             action_high,
             dt: timestep * spec.frame_skip as f64,
             elapsed: 0,
+            horizon: Horizon::Task,
             rng: ChaCha8Rng::seed_from_u64(0),
         }
+    }
+
+    /// The same environment, its episodes ending where `horizon` says.
+    pub fn with_horizon(mut self, horizon: Horizon) -> Self {
+        self.horizon = horizon;
+        self
+    }
+
+    pub fn set_horizon(&mut self, horizon: Horizon) {
+        self.horizon = horizon;
     }
 
     pub fn spec(&self) -> &'static EnvSpec {
@@ -351,7 +365,7 @@ impl Env {
         let cost = if self.spec.contact.is_some() { ctrl_cost - contact } else { ctrl_cost };
         StepInfo {
             reward: (terms.reward_forward + survive) - cost,
-            terminated: !healthy,
+            terminated: !healthy && self.horizon == Horizon::Task,
             truncated: self.elapsed >= self.spec.max_episode_steps,
             terms,
             x_position,
@@ -449,6 +463,34 @@ mod tests {
             assert_eq!(env.action_bounds().0, vec![-1.0; act].as_slice());
             assert_eq!(env.action_bounds().1, vec![1.0; act].as_slice());
         }
+    }
+
+    /// A fixed horizon steps a fallen Hopper on to the time limit, paying no healthy reward
+    /// while it lies there; the task's own ends the episode at the fall, after the same steps.
+    #[test]
+    fn a_fixed_horizon_runs_to_the_time_limit() {
+        let run = |horizon: Horizon| {
+            let mut env = Env::new(EnvId::Hopper).unwrap().with_horizon(horizon);
+            let mut obs = vec![0.0; 11];
+            env.reset(Some(3), &mut obs);
+            let mut infos = Vec::new();
+            loop {
+                // Full torque on every joint: the Hopper falls within a few dozen steps.
+                let info = env.step(&[1.0, 1.0, 1.0], &mut obs).unwrap();
+                infos.push(info);
+                if info.terminated || info.truncated {
+                    return infos;
+                }
+            }
+        };
+        let (task, fixed) = (run(Horizon::Task), run(Horizon::Fixed));
+        assert!(task.len() < 200 && task.last().unwrap().terminated, "{} steps", task.len());
+        assert_eq!(fixed.len(), 1000);
+        assert!(fixed.iter().all(|i| !i.terminated) && fixed.last().unwrap().truncated);
+        assert_eq!(&fixed[..task.len() - 1], &task[..task.len() - 1], "the same transitions up to the fall");
+        assert!(fixed[task.len()..].iter().any(|i| i.terms.reward_survive == 0.0), "no healthy reward once fallen");
+        assert_eq!(Horizon::Fixed.on(EnvId::HalfCheetah), Horizon::Task);
+        assert_eq!(Horizon::Fixed.on(EnvId::Ant), Horizon::Fixed);
     }
 
     #[test]

@@ -98,6 +98,11 @@ impl VecEnv {
         &self.slots[i].env
     }
 
+    /// Where every environment's episodes end from now on ([`super::Horizon`]).
+    pub fn set_horizon(&mut self, horizon: super::Horizon) {
+        self.slots.iter_mut().for_each(|s| s.env.set_horizon(horizon));
+    }
+
     /// Reseeds every environment (i gets `seed + i`) and returns the first observations.
     pub fn reset(&mut self, seed: u64) -> &[f32] {
         for (i, s) in self.slots.iter_mut().enumerate() {

@@ -107,7 +107,7 @@ pub fn manifests(studies: usize, replicates: usize, salt: u64) -> Vec<Manifest> 
                         run,
                         replicate: r,
                     });
-                    let x = Metrics::Eval(EvalMetrics { summary: summary(returns), reward: None, checkpoints: vec![] });
+                    let x = Metrics::Eval(EvalMetrics { summary: summary(returns), reward: None, checkpoints: vec![], terms: None });
                     let key = format!("eval-{tag}-{}-{run}", method.name());
                     out.push(manifest(
                         key,

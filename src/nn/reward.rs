@@ -24,7 +24,12 @@ pub type RewardNet = Mlp;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RewardConfig {
+    /// Observation entries the networks read: the first `obs_dim` of each observation.
     pub obs_dim: usize,
+    /// The observations' full length, where the networks read only their first `obs_dim`
+    /// entries (`trex.observation: without-contact-forces`); absent: they read all of it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_stride: Option<usize>,
     /// Also feed the action, where set (the reference uses the observation only).
     pub act_dim: Option<usize>,
     pub hidden: Vec<usize>,
@@ -38,6 +43,24 @@ pub struct RewardConfig {
 impl RewardConfig {
     pub fn input_dim(&self) -> usize {
         self.obs_dim + self.act_dim.unwrap_or(0)
+    }
+
+    /// The length of one observation row as callers pass it.
+    pub fn stride(&self) -> usize {
+        self.obs_stride.unwrap_or(self.obs_dim)
+    }
+
+    /// The network's input rows for `obs` (rows of [`Self::stride`]) and, where the network
+    /// reads them, `actions`; borrowed where they already are the rows.
+    fn rows<'a>(&self, obs: &'a [f32], actions: &[f32]) -> (std::borrow::Cow<'a, [f32]>, usize) {
+        let (od, stride) = (self.obs_dim, self.stride());
+        let n = obs.len() / stride;
+        if stride == od && self.act_dim.is_none() {
+            return (obs.into(), n);
+        }
+        let a = self.act_dim.unwrap_or(0);
+        let x = (0..n).flat_map(|i| obs[i * stride..i * stride + od].iter().chain(&actions[i * a..(i + 1) * a]).copied()).collect();
+        (std::borrow::Cow::Owned(x), n)
     }
 }
 
@@ -181,13 +204,8 @@ impl RewardEnsemble {
 
     /// Network input rows from observations and (if used) actions, on the networks' device.
     pub fn inputs(&self, obs: &[f32], actions: &[f32]) -> Tensor {
-        let n = obs.len() / self.config.obs_dim;
-        let o = Tensor::from_slice(obs).view([n as i64, self.config.obs_dim as i64]);
-        let x = match self.config.act_dim {
-            None => o,
-            Some(a) => Tensor::cat(&[o, Tensor::from_slice(actions).view([n as i64, a as i64])], 1),
-        };
-        x.to_device(self.tch_device())
+        let (x, n) = self.config.rows(obs, actions);
+        Tensor::from_slice(&x).view([n as i64, self.config.input_dim() as i64]).to_device(self.tch_device())
     }
 
     /// Model `m`'s reward per row: `(b, in)` -> `(b)`.
@@ -206,11 +224,7 @@ impl RewardEnsemble {
                     .collect()
             });
         }
-        let (od, n) = (self.config.obs_dim, obs.len() / self.config.obs_dim);
-        let x: std::borrow::Cow<[f32]> = match self.config.act_dim {
-            None => obs.into(),
-            Some(a) => (0..n).flat_map(|i| obs[i * od..(i + 1) * od].iter().chain(&actions[i * a..(i + 1) * a]).copied()).collect(),
-        };
+        let (x, n) = self.config.rows(obs, actions);
         self.nets
             .iter()
             .map(|net| {
@@ -392,9 +406,55 @@ mod tests {
         ceiling: None,
     };
 
+    /// A reward that reads the first two of three observation entries scores whole rows as
+    /// the same networks score the rows cut to two, with or without actions, and keeps its
+    /// stride through a save and a load.
+    #[test]
+    fn reads_the_leading_entries_of_each_observation() {
+        for act_dim in [None, Some(1)] {
+            let config = RewardConfig {
+                obs_dim: 2,
+                obs_stride: Some(3),
+                act_dim,
+                hidden: vec![4],
+                models: 2,
+                clip: 100.0,
+                init: WeightInit::TorchDefault,
+            };
+            let model = crate::nn::seeded(5, || RewardEnsemble::new(config.clone()));
+            let obs = [0.1f32, -0.2, 9.0, 0.3, 0.4, -9.0];
+            let actions = [0.5f32, -0.5];
+            // The rows the networks should read: the first two entries, then the action.
+            let rows: Vec<f32> = match act_dim {
+                None => vec![0.1, -0.2, 0.3, 0.4],
+                Some(_) => vec![0.1, -0.2, 0.5, 0.3, 0.4, -0.5],
+            };
+            for (m, net) in model.nets.iter().enumerate() {
+                let mut out = Vec::new();
+                Dense::from_mlp(net).predict(&rows, 2, &mut out);
+                assert_eq!(model.raw(&obs, &actions)[m], out);
+            }
+            assert_eq!(model.raw(&obs, &actions)[0].len(), 2);
+            let dir = std::env::temp_dir().join(format!("idrex-stride-{}-{}", std::process::id(), act_dim.is_some()));
+            model.save(&dir, serde_json::Value::Null).unwrap();
+            let back = RewardEnsemble::load(&dir).unwrap();
+            assert_eq!(back.config, config);
+            assert_eq!(back.raw(&obs, &actions), model.raw(&obs, &actions));
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+    }
+
     #[test]
     fn composition_on_a_fixed_batch() {
-        let config = RewardConfig { obs_dim: 2, act_dim: None, hidden: vec![4], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let config = RewardConfig {
+            obs_dim: 2,
+            obs_stride: None,
+            act_dim: None,
+            hidden: vec![4],
+            models: 2,
+            clip: 100.0,
+            init: WeightInit::TorchDefault,
+        };
         let mut model = crate::nn::seeded(0, || RewardEnsemble::new(config));
         // Model m normalises with mean m and std 2.
         for (m, norm) in model.norms.iter_mut().enumerate() {
@@ -442,7 +502,15 @@ mod tests {
     #[test]
     fn the_ranked_floor_fixes_each_members_level() {
         use crate::data::{TrajMeta, Trajectory};
-        let config = RewardConfig { obs_dim: 1, act_dim: None, hidden: vec![3], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let config = RewardConfig {
+            obs_dim: 1,
+            obs_stride: None,
+            act_dim: None,
+            hidden: vec![3],
+            models: 2,
+            clip: 100.0,
+            init: WeightInit::TorchDefault,
+        };
         let mut model = crate::nn::seeded(4, || RewardEnsemble::new(config));
         let traj = |xs: &[f32], noise: f64| Trajectory {
             obs_dim: 1,
@@ -483,7 +551,15 @@ mod tests {
     #[test]
     fn the_ceiling_caps_each_member_at_a_quantile_of_the_ranked_set() {
         use crate::data::{TrajMeta, Trajectory};
-        let config = RewardConfig { obs_dim: 1, act_dim: None, hidden: vec![3], models: 2, clip: 100.0, init: WeightInit::TorchDefault };
+        let config = RewardConfig {
+            obs_dim: 1,
+            obs_stride: None,
+            act_dim: None,
+            hidden: vec![3],
+            models: 2,
+            clip: 100.0,
+            init: WeightInit::TorchDefault,
+        };
         let mut model = crate::nn::seeded(7, || RewardEnsemble::new(config));
         let xs: Vec<f32> = (0..10).map(|i| i as f32 - 4.5).collect();
         let set = vec![Trajectory {

@@ -3,7 +3,7 @@
 //! before anything runs.
 use std::path::{Path, PathBuf};
 
-use crate::algo::{ppo::Backend, ppo::PpoConfig, trex::TrexConfig};
+use crate::algo::{ppo::Backend, ppo::PpoConfig, trex::TrexConfig, trex::TrexLoss};
 use crate::env::EnvId;
 use crate::nn::reward::Composition;
 use crate::nn::{Device, DeviceChoice};
@@ -238,6 +238,25 @@ impl Pipeline {
         if spec.ppo.backend == Backend::Tch {
             bad(&["ppo", "backend"], TCH_BACKEND.into());
         }
+        // The regression learner fits one noise curve: D-REX's one ranked set.
+        let regressing = spec.methods.iter().filter(|m| !matches!(m, Method::Bc | Method::Drex)).find(|m| {
+            let o = spec.overrides.get(m).and_then(|o| o.trex.as_ref());
+            let merged = o.map_or(Ok(spec.trex.clone()), |v| {
+                serde_json::from_value::<TrexConfig>(merge(serde_json::to_value(&spec.trex).expect("serialises"), v))
+            });
+            merged.is_ok_and(|c| c.loss == TrexLoss::Regression)
+        });
+        if let Some(m) = regressing {
+            let at: &[&str] = if spec.trex.loss == TrexLoss::Regression { &["trex", "loss"] } else { &["overrides", m.name(), "trex"] };
+            bad(
+                at,
+                format!(
+                    "trex.loss: regression learns D-REX's reward from its one ranked set, and {} ranks several; set it for D-REX \
+                     alone (`overrides: {{drex: {{trex: {{loss: regression}}}}}}`) or run D-REX without the iD-REX methods",
+                    m.name()
+                ),
+            );
+        }
         if !(spec.eval.bc_warning.is_finite() && (0.0..=1.0).contains(&spec.eval.bc_warning)) {
             bad(
                 &["eval", "bc_warning"],
@@ -370,7 +389,9 @@ impl Pipeline {
         self.with_override(&self.spec.trex, self.spec.overrides.get(&m).and_then(|o| o.trex.as_ref()))
     }
     pub fn ppo_for(&self, m: Method) -> PpoConfig {
-        self.with_override(&self.spec.ppo, self.spec.overrides.get(&m).and_then(|o| o.ppo.as_ref()))
+        let mut cfg: PpoConfig = self.with_override(&self.spec.ppo, self.spec.overrides.get(&m).and_then(|o| o.ppo.as_ref()));
+        cfg.horizon = cfg.horizon.on(self.env);
+        cfg
     }
     fn with_override<T: serde::Serialize + serde::de::DeserializeOwned + Clone>(&self, base: &T, o: Option<&serde_json::Value>) -> T {
         match o {
@@ -464,6 +485,11 @@ mod tests {
         assert_eq!(err("version: 1\nenv: Hopper-v5\nmethods: [\"drex\\nx\"]\n").lines().count(), 1);
         assert!(err("version: 1\nenv: Hopper-v5\niterations: 2075\n").contains("p.yaml:3:1: iterations is 2075; give at most 10"));
         assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  backend: tch\n").contains("p.yaml:4:3: ppo.backend tch"));
+        assert!(err("version: 1\nenv: Hopper-v5\ntrex:\n  loss: regression\n").contains("p.yaml:4:3: trex.loss: regression learns"));
+        assert!(
+            err("version: 1\nenv: Hopper-v5\noverrides:\n  idrex-multi-bc:\n    trex:\n      loss: regression\n")
+                .contains("idrex-multi-bc ranks several")
+        );
         assert!(
             err("version: 1\nenv: Hopper-v5\neval:\n  bc_warning: 70\n").starts_with("p.yaml:4:3: eval.bc_warning 70 is not a fraction")
         );

@@ -317,6 +317,7 @@ mod tests {
                 sigmas: vec![],
                 noise: Default::default(),
                 rollouts_per_level: value as usize,
+                horizon: Default::default(),
             }),
             seed: 2 * sleep_ms + fail as u64,
             inputs: Inputs::ActionNoiseRollouts(ActionNoiseInputs { policies: inputs.iter().map(|s| s.to_string()).collect() }),

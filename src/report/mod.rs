@@ -18,6 +18,7 @@ mod notes;
 mod protocols;
 mod returns;
 pub mod studies;
+pub mod terms;
 #[cfg(test)]
 mod tests;
 
@@ -142,6 +143,8 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let (mut a_pearson, mut a_spearman, mut a_pairwise) = (vec![], vec![], vec![]);
     let (mut a_spearman_checkpoints, mut a_pearson_checkpoints) = (vec![], vec![]);
     let mut a_capped: Vec<Option<f64>> = vec![];
+    let mut a_ssrr = vec![];
+    let ssrr = terms::ssrr_pearson(store);
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, TableId, String), Vec<RunEval>> = BTreeMap::new();
     let mut demo_returns: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
@@ -196,6 +199,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
             a_pairwise.push(acc.pairwise_accuracy);
             a_spearman_checkpoints.push(over_checkpoints(&x.checkpoints, spearman));
             a_pearson_checkpoints.push(over_checkpoints(&x.checkpoints, pearson));
+            a_ssrr.push(m.inputs.get(&Role::Reward.name()).and_then(|k| ssrr.get(k)).copied().unwrap_or(f64::NAN));
             // The PPO run behind the policy: how much of its learned reward the ceiling capped.
             let ppo = m.inputs.get(&Role::Policy.name()).and_then(|k| store.get(k)).and_then(|pm| Typed::of(pm).ok());
             a_capped.push(match ppo {
@@ -250,6 +254,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
             Column::new("pairwise_accuracy".into(), a_pairwise),
             Column::new("spearman_over_checkpoints".into(), a_spearman_checkpoints),
             Column::new("pearson_over_checkpoints".into(), a_pearson_checkpoints),
+            Column::new("pearson_ssrr".into(), a_ssrr),
             Column::new("reward_capped".into(), a_capped),
         ])?,
         runs,
@@ -278,6 +283,9 @@ pub struct Tables {
     /// The answer warns where BC ends below this fraction of its demonstrations' average
     /// ([`crate::algo::scoring::CloneGap`]).
     pub bc_warning: f64,
+    /// How each method's final policies earn their return ([`terms::rows`]; read from the
+    /// stored rollouts, so filled by the caller that has the store).
+    pub terms: Vec<terms::TermRow>,
 }
 
 impl Tables {
@@ -299,6 +307,9 @@ impl Tables {
         }
         if !self.clones.is_empty() {
             out.push(("clones", Table::of(&self.clones)));
+        }
+        if !self.terms.is_empty() {
+            out.push(("terms", Table::of(&self.terms)));
         }
         out
     }
@@ -356,6 +367,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
             col("pairwise_accuracy").mean(),
             col("spearman_over_checkpoints").mean(),
             col("pearson_over_checkpoints").mean(),
+            col("pearson_ssrr").mean(),
             col("reward_capped").mean(),
             col("spearman").count().alias("runs"),
         ])
@@ -401,6 +413,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
                 pairwise_accuracy: f(&accuracy, "pairwise_accuracy", i),
                 spearman_over_checkpoints: f(&accuracy, "spearman_over_checkpoints", i),
                 pearson_over_checkpoints: f(&accuracy, "pearson_over_checkpoints", i),
+                pearson_ssrr: f(&accuracy, "pearson_ssrr", i),
                 reward_capped: cell_f(&accuracy, "reward_capped", i),
                 runs: n(&accuracy, "runs", i),
             })
@@ -412,6 +425,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         demo_returns: long.demo_returns,
         looks: looks::rows(store),
         bc_warning: crate::algo::scoring::BC_WARNING,
+        terms: Vec::new(),
     })
 }
 

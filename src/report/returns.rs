@@ -43,8 +43,10 @@ pub struct AccuracyRow {
     pub spearman: f64,
     pub pairwise_accuracy: f64,
     pub spearman_over_checkpoints: f64,
-    /// SSRR's number: see [`super::over_checkpoints`].
+    /// See [`super::over_checkpoints`].
     pub pearson_over_checkpoints: f64,
+    /// SSRR's number: [`super::terms::ssrr_pearson`].
+    pub pearson_ssrr: f64,
     /// With `reward.ceiling`: the mean over runs of the fraction of the members' per-step
     /// values PPO trained on that the ceiling capped (None without a ceiling).
     pub reward_capped: Option<f64>,
@@ -95,6 +97,7 @@ impl Row for AccuracyRow {
             "pairwise_accuracy",
             "spearman_over_checkpoints",
             "pearson_over_checkpoints",
+            "pearson_ssrr",
             "reward_capped",
             "runs",
         ]
@@ -110,6 +113,7 @@ impl Row for AccuracyRow {
             x(self.pairwise_accuracy),
             x(self.spearman_over_checkpoints),
             x(self.pearson_over_checkpoints),
+            x(self.pearson_ssrr),
             Cell::opt(self.reward_capped, 3),
             Cell::int(self.runs),
         ]
@@ -164,8 +168,9 @@ pub fn markdown(t: &Tables) -> String {
         "\n## Learned reward on the policies' own evaluation rollouts (mean over runs)\n\n",
         "Pearson, Spearman and pairwise accuracy: predicted against true return over the final policy's episodes. ",
         "Over checkpoints: Spearman and Pearson correlation of learned and true return across each PPO run's checkpoints ",
-        "(does climbing the learned reward climb the true one? Pearson over these unseen policies is the number SSRR ",
-        "reports, there per episode). Capped by the ceiling: the fraction of the learned ",
+        "(does climbing the learned reward climb the true one?). Pearson, SSRR's way: over every trajectory of the ",
+        "reward's ranked sets, the demonstrations and the final policies' evaluation episodes (SSRR's number; SSRR ",
+        "pools checkpoints' rollouts where this pools the final policies'). Capped by the ceiling: the fraction of the learned ",
         "reward's per-step values PPO trained on that `reward.ceiling` cut (n/a without a ceiling).\n\n",
     ));
     let mut accuracy = Table::of(&t.accuracy);
@@ -178,12 +183,14 @@ pub fn markdown(t: &Tables) -> String {
         "pairwise accuracy",
         "Spearman over checkpoints",
         "Pearson over checkpoints",
+        "Pearson, SSRR's way",
         "capped by the ceiling",
         "runs",
     ]
     .map(String::from)
     .to_vec();
     out.push_str(&accuracy.markdown());
+    out.push_str(&super::terms::markdown(&t.terms));
     out.push_str(&protocols_markdown(&t.protocols));
     out.push_str(&clones::markdown(&t.clones));
     out

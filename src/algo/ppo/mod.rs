@@ -26,7 +26,7 @@ pub use buffer::RolloutBuffer;
 pub use files::{checkpoint_dir, checkpoints, write_curve};
 
 use crate::data::{RunningMeanStd, TrajMeta};
-use crate::env::{Env, EnvId, VecEnv};
+use crate::env::{Env, EnvId, Horizon, VecEnv};
 use crate::error::{Error, Result};
 use crate::nn::policy::CpuPolicy;
 use crate::nn::reward::{Composition, CtrlAction};
@@ -94,6 +94,10 @@ pub struct PpoConfig {
     /// default) treats the limit as termination (CleanRL, and the original code's baselines
     /// PPO2). On learned rewards the bootstrap did worse (analysis/results/ablation/README.md).
     pub bootstrap_truncation: bool,
+    /// Where the training episodes end: `task` (the task's termination) or `fixed` (only at
+    /// the time limit; [`crate::env::Horizon`]). Evaluations always use the task's.
+    #[serde(skip_serializing_if = "Horizon::is_task")]
+    pub horizon: Horizon,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
@@ -132,6 +136,7 @@ impl Default for PpoConfig {
             backend: Backend::Fused,
             checkpoint_every: 20,
             bootstrap_truncation: false,
+            horizon: Horizon::Task,
         }
     }
 }
@@ -223,6 +228,7 @@ pub fn train(
     let started = Instant::now();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut envs = VecEnv::new(id, cfg.num_envs, seed, cfg.threads)?;
+    envs.set_horizon(cfg.horizon);
     let (n, od, ad) = (cfg.num_envs, envs.obs_dim(), envs.act_dim());
     let mut pconfig = PolicyConfig::ppo(od, ad);
     pconfig.hidden = cfg.hidden.clone();

@@ -17,71 +17,14 @@ use crate::kernels::Buf;
 use crate::kernels::bf16::Precision;
 use crate::nn::dense::{Dense, Scratch};
 use crate::nn::trainer::{LANES, Trainer};
-use crate::nn::{Device, RewardConfig, RewardEnsemble, RewardNet, WeightInit};
+use crate::nn::{Device, RewardConfig, RewardEnsemble, RewardNet};
 use crate::seed::{self, Purpose};
 
+mod config;
+pub mod regression;
+pub use config::{RewardObservation, TrexConfig, TrexLoss};
 mod torch;
 pub(crate) use torch::train_torch;
-
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct TrexConfig {
-    /// Hidden layer sizes of each reward network (ReLU).
-    pub hidden: Vec<usize>,
-    /// Members of the ensemble, each trained on its own pairs and seed.
-    pub models: usize,
-    /// Training pairs sampled per member (the validation pairs among them).
-    pub pairs_per_model: usize,
-    /// Window length in steps (shortened to the shorter trajectory where needed).
-    pub window: usize,
-    /// Smallest score difference for a pair.
-    pub min_margin: f64,
-    /// Pair only trajectories of the same group (multi-BC ranks within one clone).
-    pub same_group: bool,
-    /// Adam learning rate.
-    pub lr: f64,
-    /// Pairs per minibatch.
-    pub batch_size: usize,
-    /// Minibatch updates per member.
-    pub iterations: usize,
-    /// Weight of the sum of squared weights.
-    pub l2: f64,
-    /// Fraction of the pairs held out for validation accuracy.
-    pub val_fraction: f64,
-    /// Feed the action to the reward net too.
-    pub action_input: bool,
-    /// Initialisation of the reward networks.
-    pub init: WeightInit,
-    /// The factors of the training products: f32 (the default) or bf16 with f32
-    /// accumulation (`kernels::bf16`; native where the processor has AVX512-BF16, the same bits
-    /// emulated elsewhere). Inference is f32 either way.
-    #[serde(skip_serializing_if = "Precision::is_f32")]
-    pub precision: Precision,
-}
-
-impl Default for TrexConfig {
-    fn default() -> Self {
-        TrexConfig {
-            hidden: vec![256, 256],
-            models: 3,
-            pairs_per_model: 5000,
-            window: 50,
-            min_margin: 0.3,
-            same_group: false,
-            lr: 1e-4,
-            batch_size: 64,
-            iterations: 3000,
-            l2: 0.01,
-            val_fraction: 0.2,
-            action_input: false,
-            // The original code's N(0, 0.02^2): with libtorch's default init, no setting of
-            // PPO's reward composition kept the learned reward's gains on HalfCheetah
-            // (analysis/results/ablation/README.md).
-            init: WeightInit::Normal002,
-            precision: Precision::F32,
-        }
-    }
-}
 
 /// A training pair: windows `(trajectory, start)` of length `len`; `label` is 0 when the
 /// first window is preferred, 1 when the second is.
@@ -280,6 +223,7 @@ pub fn train(
     let obs_dim = trajs[0].obs_dim;
     let config = RewardConfig {
         obs_dim,
+        obs_stride: None,
         act_dim: cfg.action_input.then_some(trajs[0].act_dim),
         hidden: cfg.hidden.clone(),
         models: cfg.models,
@@ -401,6 +345,7 @@ mod tests {
     use super::torch::DevicePairs;
     use super::*;
     use crate::data::TrajMeta;
+    use crate::nn::WeightInit;
     use crate::stats::{pairwise_accuracy, spearman};
     use tch::Tensor;
 
@@ -542,8 +487,15 @@ mod tests {
         assert!(pairs.iter().any(|p| p.len == 15) && pairs.iter().any(|p| p.len == 25));
         // Torch's default initialisation: larger weights than N(0, 0.02^2), so that the
         // gradients are well above rounding.
-        let config =
-            RewardConfig { obs_dim: 3, act_dim: None, hidden: cfg.hidden.clone(), models: 1, clip: 100.0, init: WeightInit::TorchDefault };
+        let config = RewardConfig {
+            obs_dim: 3,
+            obs_stride: None,
+            act_dim: None,
+            hidden: cfg.hidden.clone(),
+            models: 1,
+            clip: 100.0,
+            init: WeightInit::TorchDefault,
+        };
         let model = crate::nn::seeded(1, || RewardEnsemble::new(config));
         let net = &model.nets[0];
         let picks: Vec<usize> = (n_val..pairs.len()).step_by(7).collect();
@@ -595,7 +547,15 @@ mod tests {
         };
         let (dense, dr) = train(&trajs, &ranking, &cfg, 3, 2, Device::Cpu).unwrap();
         let torch_run = || {
-            let config = RewardConfig { obs_dim: 3, act_dim: None, hidden: cfg.hidden.clone(), models: 2, clip: 100.0, init: cfg.init };
+            let config = RewardConfig {
+                obs_dim: 3,
+                obs_stride: None,
+                act_dim: None,
+                hidden: cfg.hidden.clone(),
+                models: 2,
+                clip: 100.0,
+                init: cfg.init,
+            };
             let mut model = crate::nn::seeded(3, || RewardEnsemble::new(config));
             let reports = train_torch(&mut model, &trajs, &ranking, &cfg, 3, tch::Device::Cpu).unwrap();
             (model, reports)

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
-use crate::env::EnvId;
+use crate::env::{EnvId, Horizon};
 use crate::nn::DeviceChoice;
 use crate::nn::reward::{Combine, CtrlAction, RewardLevel};
 use crate::rollout::Acting;
@@ -159,11 +159,15 @@ pub struct NoiseConfig {
     /// (analysis/results/bc-levers/).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bc: Option<BcConfig>,
+    /// Where D-REX's ranked rollouts, and every iD-REX iteration's, end: `task` (the task's
+    /// termination, the original code's) or `fixed` (every rollout runs to the time limit;
+    /// `ppo.horizon` is the same for PPO's training episodes). Evaluations use the task's.
+    pub horizon: Horizon,
 }
 
 impl Default for NoiseConfig {
     fn default() -> Self {
-        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5, bc: None }
+        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5, bc: None, horizon: Horizon::Task }
     }
 }
 

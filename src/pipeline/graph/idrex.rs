@@ -66,6 +66,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                     env,
                     alphas: s.idrex.alphas.clone(),
                     rollouts_per_level: s.idrex.rollouts_per_level,
+                    horizon: s.noise.horizon.on(env),
                 }),
                 Inputs::InterpolationRollouts(InterpolationInputs { policies: current.clone(), older: previous.clone() }),
             ),
@@ -75,6 +76,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                     sigmas: s.idrex.sigmas.clone(),
                     noise: s.idrex.action_noise,
                     rollouts_per_level: s.idrex.rollouts_per_level,
+                    horizon: s.noise.horizon.on(env),
                 }),
                 Inputs::ActionNoiseRollouts(ActionNoiseInputs { policies: current.clone() }),
             ),
@@ -108,6 +110,7 @@ pub fn expand(g: &mut Graph, p: &Pipeline, variant: Variant, drex: &DrexNodes) {
                     filter,
                     schedule: s.idrex.multi_bc_schedule.clone(),
                     rollouts_per_level: s.idrex.multi_bc_rollouts_per_level,
+                    horizon: s.noise.horizon.on(env),
                     device: p.device,
                 });
                 (params, Inputs::MultiBcRollouts(inputs))

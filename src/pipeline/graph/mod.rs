@@ -95,7 +95,13 @@ impl Graph {
 
 /// A T-REX node's parameters for `m` on the given ranked sets.
 pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, cross_level: bool) -> Params {
-    Params::Trex(trex::TrexParams { env: p.env, trex: p.trex_for(m), sets, cross_level, device: p.device })
+    let mut cfg = p.trex_for(m);
+    // On a task without contact forces in its observation the option changes nothing: the key
+    // stays the one without it.
+    if p.env.spec().contact.is_none() {
+        cfg.observation = crate::algo::trex::RewardObservation::All;
+    }
+    Params::Trex(trex::TrexParams { env: p.env, trex: cfg, sets, cross_level, device: p.device })
 }
 
 fn eval_params(p: &Pipeline, method: Method, iteration: usize, run: usize) -> Params {
@@ -187,6 +193,8 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             ppo.total_steps = s.demonstrator.steps;
             ppo.eval_every = s.demonstrator.eval_every;
             ppo.eval_mean = s.demonstrator.eval_mean;
+            // The demonstrator learns the task as it is.
+            ppo.horizon = crate::env::Horizon::Task;
             let d = g.push(
                 "demonstrator",
                 Params::Demonstrator(demos::DemonstratorParams { env, ppo, target_return: s.demonstrator.target_return }),
@@ -229,6 +237,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             env,
             schedule: s.noise.schedule.clone(),
             rollouts_per_level: s.noise.rollouts_per_level,
+            horizon: s.noise.horizon.on(env),
         }),
         seed0,
         Inputs::NoiseRollouts(NoiseInputs { policy: source.clone() }),

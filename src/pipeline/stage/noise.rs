@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
 use crate::algo::noise;
 use crate::data::TrajMeta;
-use crate::env::{Env, EnvId};
+use crate::env::{Env, EnvId, Horizon};
 use crate::error::Result;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -15,6 +15,9 @@ pub struct NoiseParams {
     /// Epsilon levels.
     pub schedule: Vec<f64>,
     pub rollouts_per_level: usize,
+    /// Where the rollouts end ([`crate::env::Horizon`]; absent from the key when `task`).
+    #[serde(default, skip_serializing_if = "Horizon::is_task")]
+    pub horizon: Horizon,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -29,7 +32,7 @@ crate::stage_inputs! {
 }
 
 pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Result<NoiseMetrics> {
-    let mut env = Env::new(p.env)?;
+    let mut env = Env::new(p.env)?.with_horizon(p.horizon);
     let policy = load_policy_for(&inputs.policy, &env, p.env)?;
     ctx.progress.set_message("epsilon-greedy rollouts");
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };

@@ -6,10 +6,10 @@
 use std::path::PathBuf;
 
 use super::{REWARD, StageCtx, read_rollouts};
-use crate::algo::trex::{self, ModelReport, Ranking, TrexConfig};
+use crate::algo::trex::{self, ModelReport, Ranking, TrexConfig, TrexLoss, regression};
 use crate::data::Trajectory;
-use crate::env::EnvId;
-use crate::error::Result;
+use crate::env::{Env, EnvId};
+use crate::error::{Error, Result};
 use crate::nn::Device;
 use crate::stats::{nan_as_null, pearson, spearman};
 
@@ -50,6 +50,9 @@ pub struct TrainSet {
     pub scored: Scored,
     pub noise: Vec<f64>,
     pub level: Vec<usize>,
+    /// Each trajectory's length (absent from stages before it was recorded).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lengths: Vec<usize>,
     #[serde(with = "nan_as_null")]
     pub spearman: f64,
     #[serde(with = "nan_as_null")]
@@ -64,6 +67,17 @@ pub struct TrexMetrics {
     /// Mean validation pair accuracy over the models.
     #[serde(with = "nan_as_null")]
     pub val_accuracy: f64,
+    /// With `trex.loss: regression`: the curve the reward was regressed on and each member's
+    /// fit (`models` and `val_accuracy` are then the ranking ensemble's that stood in for
+    /// AIRL's reward).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regression: Option<RegressionFit>,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RegressionFit {
+    pub curve: regression::Curve,
+    pub members: Vec<regression::RegressionReport>,
 }
 
 crate::stage_inputs! {
@@ -86,7 +100,32 @@ pub fn run(p: &TrexParams, inputs: &TrexInputs<PathBuf>, ctx: &StageCtx) -> Resu
         }
     }
     ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
-    let (model, reports) = trex::train(&trajs, &ranking, &p.trex, ctx.seed, ctx.threads, p.device)?;
+    let seen = p.trex.observation.seen(&Env::new(p.env)?);
+    let part: Vec<Trajectory> = match seen {
+        None => Vec::new(),
+        Some(k) => trajs.iter().map(|t| t.obs_prefix(k)).collect(),
+    };
+    let learn_from = if seen.is_some() { &part } else { &trajs };
+    let (mut model, reports) = trex::train(learn_from, &ranking, &p.trex, ctx.seed, ctx.threads, p.device)?;
+    let mut fit = None;
+    if p.trex.loss == TrexLoss::Regression {
+        if inputs.sets.len() != 1 {
+            return Err(Error::Invalid(
+                "trex.loss: regression learns D-REX's reward from its one ranked set; set it for D-REX only".into(),
+            ));
+        }
+        ctx.progress.set_message("regression on the noise curve");
+        let per_step: Vec<f64> =
+            learn_from.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions) / t.len().max(1) as f64).collect();
+        let noise: Vec<f64> = learn_from.iter().map(|t| t.meta.noise).collect();
+        let curve = regression::fit(&noise, &per_step)
+            .ok_or_else(|| Error::Invalid("trex.loss: regression needs a ranked set of at least two noise levels".into()))?;
+        let (regressed, members) = regression::train(learn_from, &curve, model.config.clone(), &p.trex, ctx.seed, ctx.threads)?;
+        model = regressed;
+        fit = Some(RegressionFit { curve, members });
+    }
+    // From here on the reward takes whole observations and reads their first `obs_dim`.
+    model.config.obs_stride = seen.map(|_| trajs[0].obs_dim);
     model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
     let score = |ts: &[Trajectory]| Scored {
         predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
@@ -97,10 +136,12 @@ pub fn run(p: &TrexParams, inputs: &TrexInputs<PathBuf>, ctx: &StageCtx) -> Resu
     Ok(TrexMetrics {
         val_accuracy: reports.iter().map(|r| r.val_accuracy).sum::<f64>() / reports.len() as f64,
         models: reports,
+        regression: fit,
         train_set: TrainSet {
             spearman: spearman(&train.predicted, &train.truth),
             pearson: pearson(&train.predicted, &train.truth),
             noise: trajs.iter().map(|t| t.meta.noise).collect(),
+            lengths: trajs.iter().map(Trajectory::len).collect(),
             level: ranking.levels,
             scored: train,
         },

@@ -3,7 +3,7 @@
 //! time-correlated); lower sigma ranks higher, within one source policy.
 use crate::algo::noise::NoiseProcess;
 use crate::data::TrajMeta;
-use crate::env::{Env, EnvId};
+use crate::env::{Env, EnvId, Horizon};
 use crate::error::Result;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
@@ -16,6 +16,9 @@ pub struct Params {
     pub sigmas: Vec<f64>,
     pub noise: NoiseProcess,
     pub rollouts_per_level: usize,
+    /// Where the rollouts end ([`crate::env::Horizon`]; absent from the key when `task`).
+    #[serde(default, skip_serializing_if = "Horizon::is_task")]
+    pub horizon: Horizon,
 }
 
 crate::stage_inputs! {
@@ -24,7 +27,7 @@ crate::stage_inputs! {
 }
 
 pub fn run(p: &Params, inputs: &ActionNoiseInputs<std::path::PathBuf>, ctx: &StageCtx) -> Result<DegradationMetrics> {
-    let mut env = Env::new(p.env)?;
+    let mut env = Env::new(p.env)?.with_horizon(p.horizon);
     let ad = env.act_dim();
     let mut trajs = Vec::new();
     for (r, dir) in inputs.policies.iter().enumerate() {

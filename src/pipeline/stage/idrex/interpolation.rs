@@ -4,7 +4,7 @@
 //! within one source policy; stored as noise = 1 - alpha so that lower noise ranks higher.
 use crate::algo::noise::Interpolation;
 use crate::data::TrajMeta;
-use crate::env::{Env, EnvId};
+use crate::env::{Env, EnvId, Horizon};
 use crate::error::Result;
 use crate::pipeline::stage::{DegradationMetrics, StageCtx, degradation, load_policy_for};
 use crate::rollout::{self, PolicyActor};
@@ -16,6 +16,9 @@ pub struct Params {
     pub env: EnvId,
     pub alphas: Vec<f64>,
     pub rollouts_per_level: usize,
+    /// Where the rollouts end ([`crate::env::Horizon`]; absent from the key when `task`).
+    #[serde(default, skip_serializing_if = "Horizon::is_task")]
+    pub horizon: Horizon,
 }
 
 crate::stage_inputs! {
@@ -25,7 +28,7 @@ crate::stage_inputs! {
 }
 
 pub fn run(p: &Params, inputs: &InterpolationInputs<std::path::PathBuf>, ctx: &StageCtx) -> Result<DegradationMetrics> {
-    let mut env = Env::new(p.env)?;
+    let mut env = Env::new(p.env)?.with_horizon(p.horizon);
     let noise: Vec<f64> = p.alphas.iter().map(|a| 1.0 - a).collect();
     let mut trajs = Vec::new();
     for (r, (n, o)) in inputs.policies.iter().zip(&inputs.older).enumerate() {

@@ -15,7 +15,7 @@ use super::clone::{self, CloneRecord};
 use crate::algo::noise;
 use crate::algo::scoring::{Fidelity, demo_scale, per_step_score, select};
 use crate::data::{TrajMeta, Trajectory};
-use crate::env::{Env, EnvId};
+use crate::env::{Env, EnvId, Horizon};
 use crate::error::{Error, Result};
 use crate::nn::{Device, RewardEnsemble};
 use crate::pipeline::config::{CloneConfig, CloneFilter, CloneSource};
@@ -34,6 +34,9 @@ pub struct Params {
     pub filter: CloneFilter,
     pub schedule: Vec<f64>,
     pub rollouts_per_level: usize,
+    /// Where the rollouts end ([`crate::env::Horizon`]; absent from the key when `task`).
+    #[serde(default, skip_serializing_if = "Horizon::is_task")]
+    pub horizon: Horizon,
     /// Where the clones train; absent (the CPU) from a CPU stage's parameters and key.
     #[serde(default, skip_serializing_if = "Device::is_cpu")]
     pub device: Device,
@@ -131,7 +134,10 @@ pub fn run(p: &Params, inputs: &MultiBcInputs<std::path::PathBuf>, ctx: &StageCt
         let made = clone::make(&mut env, dir, source_step, &p.clone, p.env, ctx.seed, r, ctx.threads, p.device)?;
         let meta = TrajMeta { source: format!("multi-bc/{r}"), group: r, ..Default::default() };
         let seed = seed::derive(ctx.seed, Purpose::CloneRollouts, r as u64);
+        // The ranked rollouts end where `horizon` says; the clones' fidelity episodes where the task does.
+        env.set_horizon(p.horizon);
         let trajs = noise::epsilon_greedy(&mut env, &made.policy, &p.schedule, p.rollouts_per_level, seed, &meta);
+        env.set_horizon(Horizon::Task);
         let score_under = |(reward, scale): &(RewardEnsemble, Vec<f64>)| {
             baseline.as_ref().map(|(_, base)| per_step_score(reward, scale, &made.fidelity_episodes, base))
         };
