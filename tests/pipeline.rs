@@ -241,14 +241,17 @@ import csv, json, os, sys
 store, out = sys.argv[1], sys.argv[2]
 read = lambda name: list(csv.DictReader(open(os.path.join(out, name))))
 means = {(r["env"], r["pipeline"], r["method"]): float(r["mean"]) for r in read("returns.csv")}
+for r in read("demos.csv"):
+    means[(r["env"], r["pipeline"], "demonstrations")] = float(r["demos_avg"])
 terms = read("terms.csv")
-assert len(terms) == len(means) == 5, (len(terms), len(means))
+assert len(terms) == len(means) == 6, (len(terms), len(means))
 for r in terms:
     total = sum(float(r[c]) for c in ("forward", "ctrl", "survive", "contact"))
     assert abs(total - float(r["return"])) < 1e-6 * max(1.0, abs(total)), r
     assert abs(float(r["return"]) - means[(r["env"], r["pipeline"], r["method"])]) < 1e-6, r
     assert r["earned_by"] in ("moving", "living") and float(r["survive"]) > 0, r
-    assert (r["learned_per_step"] == "") == (r["method"] == "bc") == (r["ranked_best_per_step"] == ""), r
+    learned = r["method"] not in ("bc", "demonstrations")
+    assert (r["learned_per_step"] != "") == learned == (r["ranked_best_per_step"] != ""), r
 ms = {}
 for d in os.listdir(store):
     if not d.startswith("."):

@@ -55,7 +55,8 @@ fn draw(a: u64, b: u64, c: u64) -> f64 {
 /// The manifests of `studies` studies of `replicates` replicates each.
 pub fn manifests(studies: usize, replicates: usize, salt: u64) -> Vec<Manifest> {
     let mut out = Vec::new();
-    let summary = |returns: Vec<f64>| RolloutSummary { stats: ReturnStats::of(&returns), lengths: vec![1000; returns.len()], returns };
+    let summary =
+        |returns: Vec<f64>| RolloutSummary { stats: ReturnStats::of(&returns), lengths: vec![1000; returns.len()], returns, terms: None };
     for s in 0..studies {
         let name = format!("study-{s:03}");
         for r in 0..replicates {
@@ -107,7 +108,7 @@ pub fn manifests(studies: usize, replicates: usize, salt: u64) -> Vec<Manifest> 
                         run,
                         replicate: r,
                     });
-                    let x = Metrics::Eval(EvalMetrics { summary: summary(returns), reward: None, checkpoints: vec![], terms: None });
+                    let x = Metrics::Eval(EvalMetrics { summary: summary(returns), reward: None, checkpoints: vec![] });
                     let key = format!("eval-{tag}-{}-{run}", method.name());
                     out.push(manifest(
                         key,

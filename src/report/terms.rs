@@ -11,8 +11,7 @@ use crate::env::EnvId;
 use crate::log::table::{Cell, Row};
 use crate::nn::RewardEnsemble;
 use crate::pipeline::role::{Role, Series};
-use crate::pipeline::stage::eval::EpisodeTerms;
-use crate::pipeline::stage::{Metrics, Params, REWARD, StageKind, Typed, read_rollouts};
+use crate::pipeline::stage::{EpisodeTerms, Metrics, Params, REWARD, RolloutSummary, StageKind, Typed, read_rollouts};
 use crate::stats::pearson;
 use crate::store::{Manifest, Store};
 
@@ -96,24 +95,22 @@ fn ranked_levels(model: &RewardEnsemble, set: &[Trajectory]) -> (f64, f64) {
 pub fn rows(arts: &Artifacts, store: Option<&Store>) -> Vec<TermRow> {
     let mut ranked: BTreeMap<String, Option<(f64, f64)>> = BTreeMap::new();
     let mut groups: BTreeMap<(EnvId, String, String), Sums> = BTreeMap::new();
+    let mut demos_seen = std::collections::BTreeSet::new();
     for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
         let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
-        let terms = match (&x.terms, store) {
-            (Some(t), _) => t.clone(),
-            (None, Some(store)) if !arts.is_archived(&m.key) => match store.input_dir(&m.key).and_then(|d| read_rollouts(&d)) {
-                Ok(trajs) => EpisodeTerms::of(&trajs),
-                Err(e) => {
-                    tracing::warn!("terms: skipping {}: {e}", &m.key[..12]);
-                    continue;
-                }
-            },
-            _ => continue,
-        };
+        // The demonstrations the table compares with, once per table: idrex's own only (an
+        // imported file's terms are not known).
+        if let Some(dk) = m.inputs.get(&Role::Demos.name())
+            && demos_seen.insert((p.table(), dk.clone()))
+            && let Some(dm) = arts.get(dk)
+            && let Ok(Typed { metrics: Metrics::Demos(d), .. }) = Typed::of(dm)
+            && let Some(terms) = terms_of(&d, dm, arts, store)
+        {
+            add(groups.entry((p.env, p.table(), DEMOS.to_string())).or_default(), &d, &terms);
+        }
+        let Some(terms) = terms_of(&x.summary, m, arts, store) else { continue };
         let sums = groups.entry((p.env, p.table(), method_label(p.method, p.iteration))).or_default();
-        sums.episodes += x.summary.returns.len();
-        sums.steps += x.summary.lengths.iter().sum::<usize>();
-        let add = [x.summary.returns.iter().sum::<f64>(), sum(&terms.forward), sum(&terms.ctrl), sum(&terms.survive), sum(&terms.contact)];
-        sums.terms.iter_mut().zip(add).for_each(|(a, b)| *a += b);
+        add(sums, &x.summary, &terms);
         if let (Some(acc), Some(k)) = (&x.reward, reward_of(m)) {
             let (s, n) = sums.learned.get_or_insert((0.0, 0));
             *s += sum(&acc.predicted_returns);
@@ -125,8 +122,33 @@ pub fn rows(arts: &Artifacts, store: Option<&Store>) -> Vec<TermRow> {
     groups.into_iter().filter(|(_, s)| s.episodes > 0).map(|((env, pipeline, method), s)| row(env, pipeline, method, &s)).collect()
 }
 
+/// The label of the demonstrations' rows.
+pub const DEMOS: &str = "demonstrations";
+
 fn sum(v: &[f64]) -> f64 {
     v.iter().sum()
+}
+
+fn add(sums: &mut Sums, s: &RolloutSummary, terms: &EpisodeTerms) {
+    sums.episodes += s.returns.len();
+    sums.steps += s.lengths.iter().sum::<usize>();
+    let add = [sum(&s.returns), sum(&terms.forward), sum(&terms.ctrl), sum(&terms.survive), sum(&terms.contact)];
+    sums.terms.iter_mut().zip(add).for_each(|(a, b)| *a += b);
+}
+
+/// A stage's episodes' terms: from its metrics, or from its rollout file where `store` has it.
+fn terms_of(s: &RolloutSummary, m: &Manifest, arts: &Artifacts, store: Option<&Store>) -> Option<EpisodeTerms> {
+    if let Some(t) = &s.terms {
+        return Some(t.clone());
+    }
+    let store = store.filter(|_| !arts.is_archived(&m.key))?;
+    match store.input_dir(&m.key).and_then(|d| read_rollouts(&d)) {
+        Ok(trajs) => Some(EpisodeTerms::of(&trajs)),
+        Err(e) => {
+            tracing::warn!("terms: skipping {}: {e}", &m.key[..12]);
+            None
+        }
+    }
 }
 
 /// The reward per step on D-REX's ranked set's least and most noisy levels: from the T-REX

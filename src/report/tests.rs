@@ -33,7 +33,7 @@ fn manifest(key: &str, params: &Params, metrics: &Metrics, inputs: &[(&str, &str
 }
 
 fn summary(returns: &[f64]) -> RolloutSummary {
-    RolloutSummary { stats: ReturnStats::of(returns), returns: returns.to_vec(), lengths: vec![1000; returns.len()] }
+    RolloutSummary { stats: ReturnStats::of(returns), returns: returns.to_vec(), lengths: vec![1000; returns.len()], terms: None }
 }
 
 /// A checkpoint whose pessimistic learned score is `learned`.
@@ -63,7 +63,7 @@ fn store() -> Artifacts {
             run,
             replicate: r,
         };
-        let bc = EvalMetrics { summary: summary(&[890.0 + base, 910.0 + base]), reward: None, checkpoints: vec![], terms: None };
+        let bc = EvalMetrics { summary: summary(&[890.0 + base, 910.0 + base]), reward: None, checkpoints: vec![] };
         add(manifest(&format!("bc{r}"), &Params::Eval(eval(Method::Bc, 0)), &Metrics::Eval(bc), &[("demos", &demos)]));
         for run in 0..2 {
             let late = 2000.0 + base + 200.0 * run as f64;
@@ -73,7 +73,6 @@ fn store() -> Artifacts {
                 summary: summary(&[late - 10.0, late + 10.0]),
                 reward: Some(RewardAccuracy { predicted_returns: vec![1.0, 2.0], spearman: 1.0, pearson: 0.5, pairwise_accuracy: 1.0 }),
                 checkpoints: vec![checkpoint(0, &[early, early], prefers_early), checkpoint(100, &[late - 10.0, late + 10.0], 0.0)],
-                terms: None,
             };
             add(manifest(&format!("drex{r}-{run}"), &Params::Eval(eval(Method::Drex, run)), &Metrics::Eval(x), &[("demos", &demos)]));
         }

@@ -96,7 +96,7 @@ pub fn demos(p: &DemosParams, inputs: &DemosInputs<PathBuf>, ctx: &StageCtx) -> 
         &meta,
     );
     ctx.write_rollouts(p.env, &trajs, None)?;
-    Ok(RolloutSummary::of(&trajs))
+    Ok(RolloutSummary::of(&trajs).with_terms(&trajs))
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -69,31 +69,6 @@ pub struct EvalMetrics {
     /// checkpoints (BC).
     #[serde(default)]
     pub checkpoints: Vec<CheckpointEval>,
-    /// The final policy's episodes' reward terms (absent from evaluations before they were
-    /// recorded; the report then reads the rollout files).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub terms: Option<EpisodeTerms>,
-}
-
-/// Per episode, the sum of each reward term ([`crate::env::RewardTerms`]).
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct EpisodeTerms {
-    pub forward: Vec<f64>,
-    pub ctrl: Vec<f64>,
-    pub survive: Vec<f64>,
-    pub contact: Vec<f64>,
-}
-
-impl EpisodeTerms {
-    pub fn of(trajs: &[Trajectory]) -> Self {
-        let sum = |f: fn(&crate::env::RewardTerms) -> f64| trajs.iter().map(|t| t.terms.iter().map(f).sum()).collect();
-        EpisodeTerms {
-            forward: sum(|s| s.reward_forward),
-            ctrl: sum(|s| s.reward_ctrl),
-            survive: sum(|s| s.reward_survive),
-            contact: sum(|s| s.reward_contact),
-        }
-    }
 }
 
 crate::stage_inputs! {
@@ -162,5 +137,5 @@ pub fn run(p: &EvalParams, inputs: &EvalInputs<PathBuf>, ctx: &StageCtx) -> Resu
         }
     };
     ctx.write_rollouts(p.env, &trajs, learned.as_deref())?;
-    Ok(EvalMetrics { summary: RolloutSummary::of(&trajs), reward: accuracy, checkpoints, terms: Some(EpisodeTerms::of(&trajs)) })
+    Ok(EvalMetrics { summary: RolloutSummary::of(&trajs).with_terms(&trajs), reward: accuracy, checkpoints })
 }

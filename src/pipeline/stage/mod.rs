@@ -311,12 +311,43 @@ pub struct RolloutSummary {
     pub stats: ReturnStats,
     pub returns: Vec<f64>,
     pub lengths: Vec<usize>,
+    /// Each episode's reward terms, where the stage knows them: evaluations and idrex's own
+    /// demonstrations (absent from imported demonstrations and from stages before they were
+    /// recorded; the report then reads the rollout files where it can).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub terms: Option<EpisodeTerms>,
+}
+
+/// Per episode, the sum of each reward term ([`crate::env::RewardTerms`]).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EpisodeTerms {
+    pub forward: Vec<f64>,
+    pub ctrl: Vec<f64>,
+    pub survive: Vec<f64>,
+    pub contact: Vec<f64>,
+}
+
+impl EpisodeTerms {
+    pub fn of(trajs: &[Trajectory]) -> Self {
+        let sum = |f: fn(&crate::env::RewardTerms) -> f64| trajs.iter().map(|t| t.terms.iter().map(f).sum()).collect();
+        EpisodeTerms {
+            forward: sum(|s| s.reward_forward),
+            ctrl: sum(|s| s.reward_ctrl),
+            survive: sum(|s| s.reward_survive),
+            contact: sum(|s| s.reward_contact),
+        }
+    }
 }
 
 impl RolloutSummary {
     pub fn of(trajs: &[Trajectory]) -> Self {
         let returns: Vec<f64> = trajs.iter().map(Trajectory::ret).collect();
-        RolloutSummary { stats: ReturnStats::of(&returns), returns, lengths: trajs.iter().map(Trajectory::len).collect() }
+        RolloutSummary { stats: ReturnStats::of(&returns), returns, lengths: trajs.iter().map(Trajectory::len).collect(), terms: None }
+    }
+
+    /// The same, with the episodes' reward terms.
+    pub fn with_terms(self, trajs: &[Trajectory]) -> Self {
+        RolloutSummary { terms: Some(EpisodeTerms::of(trajs)), ..self }
     }
 }
 
