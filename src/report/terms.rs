@@ -302,23 +302,24 @@ pub fn markdown(rows: &[TermRow]) -> String {
     .map(String::from)
     .to_vec();
     out.push_str(&table.markdown());
-    for r in rows.iter().filter(|r| r.earned_by == EarnedBy::Living) {
-        out.push_str(&format!(
-            "\n{} {} ({}): earned by living: {:.0} of {:.0} steps, forward {:.1} against healthy {:.1}.\n",
-            r.env,
-            r.method,
-            r.pipeline,
-            r.length,
-            r.env_limit(),
-            r.forward,
-            r.survive
-        ));
-    }
     out
 }
 
-impl TermRow {
-    fn env_limit(&self) -> usize {
-        self.env.parse::<EnvId>().map_or(0, |e| e.spec().max_episode_steps)
+/// The lines the report's answer adds: each policy that earns its return by living.
+pub fn living(rows: &[TermRow]) -> String {
+    let lines: Vec<String> = rows
+        .iter()
+        .filter(|r| r.earned_by == EarnedBy::Living)
+        .map(|r| {
+            let limit = r.env.parse::<EnvId>().map_or(0, |e| e.spec().max_episode_steps);
+            format!(
+                "- {} {} ({}): {:.0} of {limit} steps, forward {:.1} against healthy {:.1} per episode.\n",
+                r.env, r.method, r.pipeline, r.length, r.forward, r.survive
+            )
+        })
+        .collect();
+    if lines.is_empty() {
+        return String::new();
     }
+    format!("**Earned by living, not by moving** (how each method earns its return, below):\n\n{}\n", lines.concat())
 }
