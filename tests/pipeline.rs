@@ -264,15 +264,16 @@ def pearson(x, y):
 evals = [m for m in ms.values() if m["kind"] == "eval" and "reward" in m["inputs"]]
 pool = {}
 for m in evals:
-    p, t = pool.setdefault(m["inputs"]["reward"], ([], []))
+    p, t = pool.setdefault((m["inputs"]["reward"], m["params"]["pipeline"]), ([], []))
     p += m["metrics"]["predicted_returns"]
     t += m["metrics"]["returns"]
 want = {}
 for m in evals:
     k = m["inputs"]["reward"]
     x = ms[k]["metrics"]
-    pred = x["train_set"]["predicted"] + x["demos"]["predicted"] + pool[k][0]
-    true = x["train_set"]["true"] + x["demos"]["true"] + pool[k][1]
+    seen = pool[(k, m["params"]["pipeline"])]
+    pred = x["train_set"]["predicted"] + x["demos"]["predicted"] + seen[0]
+    true = x["train_set"]["true"] + x["demos"]["true"] + seen[1]
     want.setdefault((m["params"]["env"], m["params"]["pipeline"], m["params"]["method"]), []).append(pearson(pred, true))
 rows = read("reward_accuracy.csv")
 assert len(rows) == len(want) == 4, rows

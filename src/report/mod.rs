@@ -199,7 +199,8 @@ fn collect(store: &Artifacts) -> Result<Long> {
             a_pairwise.push(acc.pairwise_accuracy);
             a_spearman_checkpoints.push(over_checkpoints(&x.checkpoints, spearman));
             a_pearson_checkpoints.push(over_checkpoints(&x.checkpoints, pearson));
-            a_ssrr.push(m.inputs.get(&Role::Reward.name()).and_then(|k| ssrr.get(k)).copied().unwrap_or(f64::NAN));
+            let reward = m.inputs.get(&Role::Reward.name()).cloned().unwrap_or_default();
+            a_ssrr.push(ssrr.get(&(reward, table.label.clone())).copied().unwrap_or(f64::NAN));
             // The PPO run behind the policy: how much of its learned reward the ceiling capped.
             let ppo = m.inputs.get(&Role::Policy.name()).and_then(|k| store.get(k)).and_then(|pm| Typed::of(pm).ok());
             a_capped.push(match ppo {

@@ -206,27 +206,28 @@ fn reward_of(m: &Manifest) -> Option<&String> {
     m.inputs.get(&Role::Reward.name())
 }
 
-/// Per T-REX artifact: Pearson correlation of its predicted with the true return over SSRR's
-/// pool, every trajectory of its ranked sets, the demonstrations, and the final-policy
-/// evaluation episodes of the PPO runs trained on it (rollouts no reward saw). SSRR pools
-/// PPO checkpoints' rollouts where these are the final policies'.
-pub fn ssrr_pearson(arts: &Artifacts) -> BTreeMap<String, f64> {
-    let mut unseen: BTreeMap<&String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+/// Per (T-REX artifact, table): Pearson correlation of its predicted with the true return over
+/// SSRR's pool, every trajectory of its ranked sets, the demonstrations, and the final-policy
+/// evaluation episodes of the table's PPO runs trained on it (rollouts no reward saw; other
+/// tables that share the reward pool their own). SSRR pools PPO checkpoints' rollouts where
+/// these are the final policies'.
+pub fn ssrr_pearson(arts: &Artifacts) -> BTreeMap<(String, String), f64> {
+    let mut unseen: BTreeMap<(String, String), (Vec<f64>, Vec<f64>)> = BTreeMap::new();
     for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
-        let (Some(k), Ok(Typed { metrics: Metrics::Eval(x), .. })) = (reward_of(m), Typed::of(m)) else { continue };
+        let (Some(k), Ok(Typed { params: Params::Eval(e), metrics: Metrics::Eval(x) })) = (reward_of(m), Typed::of(m)) else { continue };
         if let Some(acc) = &x.reward {
-            let (p, t) = unseen.entry(k).or_default();
+            let (p, t) = unseen.entry((k.clone(), e.table())).or_default();
             p.extend(&acc.predicted_returns);
             t.extend(&x.summary.returns);
         }
     }
     unseen
         .into_iter()
-        .filter_map(|(k, (p, t))| {
-            let Ok(Typed { metrics: Metrics::Trex(x), .. }) = Typed::of(arts.get(k)?) else { return None };
+        .filter_map(|((k, table), (p, t))| {
+            let Ok(Typed { metrics: Metrics::Trex(x), .. }) = Typed::of(arts.get(&k)?) else { return None };
             let predicted: Vec<f64> = x.train_set.scored.predicted.iter().chain(&x.demos.predicted).chain(&p).copied().collect();
             let truth: Vec<f64> = x.train_set.scored.truth.iter().chain(&x.demos.truth).chain(&t).copied().collect();
-            Some((k.clone(), pearson(&predicted, &truth)))
+            Some(((k, table), pearson(&predicted, &truth)))
         })
         .collect()
 }
