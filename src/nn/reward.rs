@@ -397,6 +397,19 @@ impl RewardEnsemble {
 mod tests {
     use super::*;
 
+    /// Two members of one hidden layer of 3 on a one-entry observation.
+    fn small_config() -> RewardConfig {
+        RewardConfig {
+            obs_dim: 1,
+            obs_stride: None,
+            act_dim: None,
+            hidden: vec![3],
+            models: 2,
+            clip: 100.0,
+            init: WeightInit::TorchDefault,
+        }
+    }
+
     const BASE: Composition = Composition {
         ctrl_coeff: 0.0,
         combine: Combine::Mean,
@@ -502,15 +515,7 @@ mod tests {
     #[test]
     fn the_ranked_floor_fixes_each_members_level() {
         use crate::data::{TrajMeta, Trajectory};
-        let config = RewardConfig {
-            obs_dim: 1,
-            obs_stride: None,
-            act_dim: None,
-            hidden: vec![3],
-            models: 2,
-            clip: 100.0,
-            init: WeightInit::TorchDefault,
-        };
+        let config = small_config();
         let mut model = crate::nn::seeded(4, || RewardEnsemble::new(config));
         let traj = |xs: &[f32], noise: f64| Trajectory {
             obs_dim: 1,
@@ -551,15 +556,7 @@ mod tests {
     #[test]
     fn the_ceiling_caps_each_member_at_a_quantile_of_the_ranked_set() {
         use crate::data::{TrajMeta, Trajectory};
-        let config = RewardConfig {
-            obs_dim: 1,
-            obs_stride: None,
-            act_dim: None,
-            hidden: vec![3],
-            models: 2,
-            clip: 100.0,
-            init: WeightInit::TorchDefault,
-        };
+        let config = small_config();
         let mut model = crate::nn::seeded(7, || RewardEnsemble::new(config));
         let xs: Vec<f32> = (0..10).map(|i| i as f32 - 4.5).collect();
         let set = vec![Trajectory {

@@ -271,7 +271,7 @@ impl Row for TermRow {
     }
 }
 
-/// The report's section: the table, and a line naming each policy that earns by living.
+/// The report's section: the table (the answer names the living policies, [`living`]).
 pub fn markdown(rows: &[TermRow]) -> String {
     if rows.is_empty() {
         return String::new();
