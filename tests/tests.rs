@@ -16,3 +16,4 @@ mod reliability;
 mod report_html;
 mod rliable;
 mod skips;
+mod sweep;

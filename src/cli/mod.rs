@@ -14,6 +14,16 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::log::table::{Format, Table};
 
+/// Fields of the pipeline file set from the command line.
+#[derive(Debug, Clone, Default, Args)]
+pub struct SetArgs {
+    /// Set a field of the file, `-S reward.ceiling=0.5`, or sweep it, `-S reward.ceiling=0.5,none`
+    /// (one variant per value, each its own study: `NAME[reward.ceiling=0.5]`); repeatable, and
+    /// several sweeps run every combination. Checked as the file's own value would be.
+    #[arg(short = 'S', long = "set", value_name = "FIELD=VALUE")]
+    pub set: Vec<String>,
+}
+
 /// How a command with tabular output prints it: aligned text by default.
 #[derive(Debug, Clone, Args)]
 pub struct TableArgs {

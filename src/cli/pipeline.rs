@@ -9,12 +9,14 @@ use crate::nn::DeviceChoice;
 use crate::pipeline::graph::{self, PlanFormat};
 use crate::pipeline::runner::{self, Status};
 use crate::pipeline::slurm::{self, NodeState, Submission};
-use crate::pipeline::{Pipeline, expand, plots, stage};
+use crate::pipeline::{Pipeline, Sweep, plots, stage};
 use crate::store::{Location, Store};
 
 #[derive(Debug, Subcommand)]
 pub enum PipelineCommand {
     /// Compute every missing node of the pipeline.
+    #[command(after_help = "Example: an ablation of the ceiling and the ensemble size, every combination one variant:\n  \
+                            idrex pipeline run pipelines/hopper.yaml -S reward.ceiling=0.75,none -S trex.models=3,5")]
     Run(RunArgs),
     /// Print the DAG with each node's key and whether it is stored.
     Plan(PlanArgs),
@@ -88,6 +90,8 @@ pub struct RunArgs {
     /// `auto` takes the GPU where libtorch sees one). The device is part of those stages' keys.
     #[arg(long, value_enum)]
     pub device: Option<DeviceChoice>,
+    #[command(flatten)]
+    pub set: super::SetArgs,
 }
 
 #[derive(Debug, Args)]
@@ -101,6 +105,8 @@ pub struct PlanArgs {
     /// The device to plan for (overrides the file's `device`), as `pipeline run --device`.
     #[arg(long, value_enum)]
     pub device: Option<DeviceChoice>,
+    #[command(flatten)]
+    pub set: super::SetArgs,
     /// The nodes as a table (node, kind, key, stored, inputs) in place of --format.
     #[command(flatten)]
     pub table: super::TableArgs,
@@ -115,6 +121,8 @@ pub struct StatusArgs {
     /// The device whose nodes to show (overrides the file's `device`).
     #[arg(long, value_enum)]
     pub device: Option<DeviceChoice>,
+    #[command(flatten)]
+    pub set: super::SetArgs,
     #[command(flatten)]
     pub table: super::TableArgs,
 }
@@ -144,17 +152,30 @@ pub enum StoreAccess {
 
 /// The pipeline file (on `device`, where given) and the store it names (or `store` overrides).
 pub fn load(file: &Path, store: Option<&str>, device: Option<DeviceChoice>, access: StoreAccess) -> anyhow::Result<(Pipeline, Store)> {
-    let p = Pipeline::load(file).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let p = match device {
-        Some(choice) => p.on(choice),
-        None => p,
+    let (s, store) = load_sweep(file, store, device, access, &[])?;
+    Ok((s.file, store))
+}
+
+/// The pipeline file with the command line's `-S` settings: its variants (one without a
+/// sweep), on `device` where given, and the store it names (or `store` overrides).
+pub fn load_sweep(
+    file: &Path,
+    store: Option<&str>,
+    device: Option<DeviceChoice>,
+    access: StoreAccess,
+    set: &[String],
+) -> anyhow::Result<(Sweep, Store)> {
+    let s = Sweep::load(file, set).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let s = match device {
+        Some(choice) => s.map(|p| Ok(p.on(choice))).map_err(anyhow::Error::msg)?,
+        None => s,
     };
     let location = match store {
         Some(s) => Location::parse(s)?,
-        None => p.store.clone(),
+        None => s.file.store.clone(),
     };
     let store = Store::connect(&location, access == StoreAccess::Write).with_context(|| format!("cannot open the store {location}"))?;
-    Ok((p, store))
+    Ok((s, store))
 }
 
 /// The nodes of a study, grouped by environment (one group, unnamed, for a single one).
@@ -162,13 +183,16 @@ fn env_groups<'a, T>(p: &Pipeline, items: &'a [T], name: impl Fn(&T) -> &str) ->
     if !p.is_study() {
         return vec![(None, items.iter().collect())];
     }
-    p.envs.iter().map(|e| (Some(e.name()), items.iter().filter(|t| name(t).starts_with(&format!("{}/", e.name()))).collect())).collect()
+    // A sweep's own nodes carry their variant's label first.
+    let of = |n: &str, e: &str| n.starts_with(&format!("{e}/")) || n.contains(&format!("/{e}/"));
+    p.envs.iter().map(|e| (Some(e.name()), items.iter().filter(|t| of(name(t), e.name())).collect())).collect()
 }
 
 fn status(args: &StatusArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Read)?;
+    let (sweep, store) = load_sweep(&args.file, args.store.as_deref(), args.device, StoreAccess::Read, &args.set.set)?;
+    let p = &sweep.file;
     store.index()?;
-    let g = expand(&p)?;
+    let g = sweep.graph()?;
     let keys = g.keys();
     // Without Slurm, the store alone answers (a claimed node then shows its last job).
     let queue = match slurm::Queue::read() {
@@ -181,7 +205,7 @@ fn status(args: &StatusArgs) -> anyhow::Result<()> {
     let mut counts: std::collections::BTreeMap<&str, usize> = Default::default();
     let mut rows = Vec::new();
     let text = !args.table.machine();
-    for (env, nodes) in env_groups(&p, &g.nodes, |n| n.name.as_str()) {
+    for (env, nodes) in env_groups(p, &g.nodes, |n| n.name.as_str()) {
         if let Some(env) = env
             && text
         {
@@ -254,9 +278,10 @@ fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Grap
 }
 
 fn plan(args: &PlanArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Read)?;
+    let (sweep, store) = load_sweep(&args.file, args.store.as_deref(), args.device, StoreAccess::Read, &args.set.set)?;
+    let p = &sweep.file;
     store.index()?;
-    let g = expand(&p)?;
+    let g = sweep.graph()?;
     let stored = |k: &str| store.check(k).is_ok();
     let keys = g.keys();
     if args.table.machine() {
@@ -277,9 +302,20 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     print!("{}", graph::render(&g, &keys, &stored, args.format));
     if args.format == PlanFormat::Text && p.is_study() {
         println!();
-        for (env, nodes) in env_groups(&p, &g.nodes, |n| n.name.as_str()) {
+        for (env, nodes) in env_groups(p, &g.nodes, |n| n.name.as_str()) {
             let done = nodes.iter().filter(|n| stored(&keys[&n.name])).count();
             println!("{}: {} nodes, {done} stored", env.unwrap_or_default(), nodes.len());
+        }
+    }
+    if args.format == PlanFormat::Text && sweep.is_sweep() {
+        println!(
+            "\n{} variants x their stages, {} distinct stages (compared against `{}`):",
+            sweep.variants.len(),
+            g.nodes.len(),
+            sweep.baseline
+        );
+        for (study, nodes, shared) in sweep.shares()? {
+            println!("  {study}: {nodes} stages, {shared} shared with another variant");
         }
     }
     if args.format == PlanFormat::Text {
@@ -309,43 +345,14 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One line: what the run will do, and how long it should take here (estimated from the
-/// store's stage times where it has them, else the reference machine's; see
-/// [`crate::pipeline::schedule`]).
-fn intent(p: &Pipeline, manifests: &[crate::store::Manifest], g: &crate::pipeline::Graph, opts: &runner::RunOptions) -> String {
-    use crate::pipeline::schedule::{Estimates, makespan};
-    let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
-    let keys = g.keys();
-    let todo = |n: &crate::pipeline::Node| !present.contains(keys[&n.name].as_str()) || opts.force.contains(&n.name);
-    let est = Estimates::from_manifests(manifests);
-    let wall = makespan(g, &|n| if todo(n) { est.seconds(n) } else { 0.0 }, opts.jobs.max(1));
-    let kinds: std::collections::BTreeSet<_> = g.nodes.iter().filter(|n| todo(n)).map(|n| n.kind()).collect();
-    let source =
-        if kinds.iter().all(|k| est.measured(*k)) { "this store's stage times" } else { "the 2-core reference machine's stage times" };
-    let methods: Vec<&str> = p.spec.methods.iter().map(|m| m.label()).collect();
-    let envs: Vec<&str> = p.envs.iter().map(|e| e.name()).collect();
-    let replicates = if p.is_replicated() { format!(", {} replicates", p.replicates.len()) } else { String::new() };
-    let to_compute = g.nodes.iter().filter(|n| todo(n)).count();
-    format!(
-        "{}: {} on {}, {} RL runs per method, K = {}{replicates}: {} stages, {to_compute} to compute; about {} with {} jobs (from {source})",
-        p.name,
-        methods.join(", "),
-        envs.join(", "),
-        p.spec.seeds.len(),
-        p.spec.iterations,
-        g.nodes.len(),
-        runner::minutes(wall),
-        opts.jobs
-    )
-}
-
 fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
-    let (p, store) = load(&args.file, args.store.as_deref(), args.device, StoreAccess::Write)?;
-    let p = match args.only_replicate {
-        Some(r) => p.only_replicate(r).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
-        None => p,
+    let (sweep, store) = load_sweep(&args.file, args.store.as_deref(), args.device, StoreAccess::Write, &args.set.set)?;
+    let sweep = match args.only_replicate {
+        Some(r) => sweep.map(|p| p.only_replicate(r)).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
+        None => sweep,
     };
-    let g = expand(&p)?;
+    let p = &sweep.file;
+    let g = sweep.graph()?;
     let manifests = store.unverified_manifests()?;
     let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
     let mut archived = Vec::new();
@@ -358,7 +365,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     } else {
         crate::pipeline::test_set::Looks::new(&[manifests.clone(), archived].concat())
     };
-    let test_set = crate::pipeline::test_set::check(&p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
+    let test_set = crate::pipeline::test_set::check(p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
         if test_set.is_some() {
             bail!(
@@ -366,7 +373,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
                 args.file.display()
             );
         }
-        return submit(args, &p, &store, &g);
+        return submit(args, p, &store, &g);
     }
     // Before any stage runs: a pipeline planned for CUDA on a machine without it.
     p.device.ensure_available().map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;
@@ -375,7 +382,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     tracing::info!("BC, T-REX and the learned reward compute on {}", p.device.name());
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let opts = runner::RunOptions { jobs: args.jobs.unwrap_or(cores), force: args.force.clone(), progress: true, test_set };
-    println!("{}", intent(&p, &manifests, &g, &opts));
+    println!("{}", runner::intent(&sweep, &manifests, &g, &opts));
     crate::pipeline::gaps::print(&g, &manifests, p.spec.eval.bc_warning);
     let started = std::time::Instant::now();
     let body = |n: &crate::pipeline::Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
@@ -415,27 +422,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     {
         crate::pipeline::gaps::print(&g, &m, p.spec.eval.bc_warning);
     }
-    // One recording per environment: each env's nodes under their names within it.
-    let mut recordings = Vec::new();
-    for &env in &p.envs {
-        let rec = match &args.recording {
-            Some(r) if !p.is_study() => r.clone(),
-            Some(r) => r.with_file_name(format!("{}-{}.rrd", r.file_stem().unwrap_or_default().to_string_lossy(), env.name())),
-            None => PathBuf::from("recordings").join(format!("{}-{}.rrd", p.name, env.name())),
-        };
-        if let Some(dir) = rec.parent() {
-            std::fs::create_dir_all(dir).ok();
-        }
-        let prefix = if p.is_study() { format!("{}/", env.name()) } else { String::new() };
-        let sub = g.subgraph(&prefix);
-        let mine: Vec<runner::Outcome> = outcomes
-            .iter()
-            .filter_map(|o| o.node.strip_prefix(&prefix).map(|n| runner::Outcome { node: n.to_string(), ..o.clone() }))
-            .collect();
-        plots::record(&sub, &mine, &store, &rec, &p.name)?;
-        println!("recording: {}", rec.display());
-        recordings.push(rec.display().to_string());
-    }
+    let recordings = plots::record_sweep(&sweep, args.recording.as_deref(), &outcomes, &store)?;
     if !failed.is_empty() {
         bail!("{} of {} stages did not complete", failed.len(), outcomes.len());
     }

@@ -64,17 +64,20 @@ pub struct ExportArgs {
     /// The archive to write: NDJSON, one manifest per line (`idrex report --archive` reads it).
     #[arg(long, value_name = "FILE.ndjson")]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub set: super::SetArgs,
 }
 
 /// Writes the manifests of the file's stored stages to an archive; names those not stored.
 pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
-    let (p, store) = super::pipeline::load(&args.file, args.store.as_deref(), None, super::pipeline::StoreAccess::Read)?;
-    let p = match args.only_replicate {
-        Some(r) => p.only_replicate(r).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
-        None => p,
+    let (sweep, store) =
+        super::pipeline::load_sweep(&args.file, args.store.as_deref(), None, super::pipeline::StoreAccess::Read, &args.set.set)?;
+    let sweep = match args.only_replicate {
+        Some(r) => sweep.map(|p| p.only_replicate(r)).map_err(|e| anyhow::anyhow!("{}: --only-replicate {r}: {e}", args.file.display()))?,
+        None => sweep,
     };
     store.index()?;
-    let keys = crate::pipeline::expand(&p)?.keys();
+    let keys = sweep.graph()?.keys();
     let mut texts = std::collections::BTreeMap::new();
     let mut missing = Vec::new();
     for (node, key) in &keys {
@@ -162,10 +165,11 @@ pub fn gc(args: &GcArgs) -> anyhow::Result<()> {
     let store = existing(&args.store, true, GIVE_STORE)?;
     let mut keep = std::collections::BTreeSet::new();
     for f in &args.files {
-        let (p, _) = super::pipeline::load(f, Some(&args.store), None, super::pipeline::StoreAccess::Read)?;
-        // Both devices' artifacts: which one computed them is not this machine's to decide.
+        // Both devices' artifacts: which one computed them is not this machine's to decide;
+        // every variant of a sweep the file declares.
         for device in [DeviceChoice::Cpu, DeviceChoice::Cuda] {
-            keep.extend(crate::pipeline::expand(&p.clone().on(device))?.keys().into_values());
+            let (sweep, _) = super::pipeline::load_sweep(f, Some(&args.store), Some(device), super::pipeline::StoreAccess::Read, &[])?;
+            keep.extend(sweep.graph()?.keys().into_values());
         }
     }
     // What each doomed artifact is, read before it goes.

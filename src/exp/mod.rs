@@ -83,6 +83,8 @@ pub struct Study {
     pub ended: f64,
     /// Whether it is, or reuses, a locked test set.
     pub test_set: Option<TestSetMark>,
+    /// Its place in a sweep, where it is a variant.
+    pub variant: Option<crate::pipeline::stage::eval::VariantTag>,
     /// (env, method label) -> replicate -> its runs.
     pub scores: BTreeMap<(EnvId, String), BTreeMap<usize, Replicate>>,
 }
@@ -119,7 +121,8 @@ impl Study {
 /// Fields that say where a node sits, not how it is configured: the study's name, its
 /// replicate and run, the method and iteration (columns of their own), the environment.
 fn structural(kind: &str, field: &str) -> bool {
-    matches!(field, "env") || (kind == StageKind::Eval.name() && matches!(field, "pipeline" | "replicate" | "run" | "method" | "iteration"))
+    matches!(field, "env")
+        || (kind == StageKind::Eval.name() && matches!(field, "pipeline" | "replicate" | "run" | "method" | "iteration" | "variant"))
 }
 
 /// `params` flattened into `prefix.field.subfield` -> value; a list is one value.
@@ -153,6 +156,9 @@ pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
         s.runs += 1;
         if m.test_set.is_some() {
             s.test_set = m.test_set.clone();
+        }
+        if p.variant.is_some() {
+            s.variant = p.variant.clone();
         }
         let rep = s.scores.entry((p.env, label)).or_default().entry(p.replicate).or_default();
         rep.seeds.insert(m.seed);

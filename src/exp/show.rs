@@ -53,6 +53,11 @@ pub fn table(studies: &[Study], sel: &Selection) -> Table {
     heads.sort();
     heads.dedup();
     let mut columns: Vec<String> = ["study", "role", "replicates", "runs", "envs", "methods"].map(String::from).to_vec();
+    // A sweep's variants: what each sets, and what it is compared with.
+    let swept = listed.iter().any(|s| s.variant.is_some());
+    if swept {
+        columns.splice(1..1, ["settings", "baseline"].map(String::from));
+    }
     columns.extend(params.iter().cloned());
     for p in &protocols {
         for (e, m) in &heads {
@@ -64,14 +69,19 @@ pub fn table(studies: &[Study], sel: &Selection) -> Table {
     let rows = listed
         .iter()
         .map(|s| {
-            let mut row = vec![
-                Cell::text(&s.name),
+            let mut row = vec![Cell::text(&s.name)];
+            if swept {
+                let v = s.variant.as_ref();
+                row.push(Cell::text(v.map_or(String::new(), |v| v.settings.join(","))));
+                row.push(Cell::text(v.map_or(String::new(), |v| v.baseline.clone())));
+            }
+            row.extend([
                 Cell::text(role(s)),
                 Cell::int(s.replicates.len()),
                 Cell::int(s.runs),
                 Cell::text(joined(s.envs.iter().map(|e| e.name()))),
                 Cell::text(joined(&s.methods)),
-            ];
+            ]);
             row.extend(params.iter().map(|k| Cell::text(s.param(k))));
             for &p in &protocols {
                 for (e, m) in &heads {

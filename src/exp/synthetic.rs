@@ -107,6 +107,7 @@ pub fn manifests(studies: usize, replicates: usize, salt: u64) -> Vec<Manifest> 
                         iteration: usize::from(method != Method::Bc),
                         run,
                         replicate: r,
+                        variant: None,
                     });
                     let x = Metrics::Eval(EvalMetrics { summary: summary(returns), reward: None, checkpoints: vec![] });
                     let key = format!("eval-{tag}-{}-{run}", method.name());

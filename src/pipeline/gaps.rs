@@ -18,10 +18,12 @@ pub fn clone_gaps(g: &Graph, manifests: &[Manifest], fraction: f64) -> Vec<(Stri
         Metrics::Demos(d) | Metrics::DemosImport(d) => Some(d.stats.mean),
         _ => None,
     };
+    // A BC policy a sweep's variants share is evaluated in each: one warning for it.
+    let mut policies = std::collections::BTreeSet::new();
     g.nodes
         .iter()
         .filter_map(|n| match (&n.params, &n.inputs) {
-            (Params::Eval(e), Inputs::Eval(i)) if e.method == Method::Bc => {
+            (Params::Eval(e), Inputs::Eval(i)) if e.method == Method::Bc && policies.insert(keys.get(&i.policy)?) => {
                 CloneGap::check(mean(&n.name)?, mean(&i.demos)?, fraction).map(|gap| (n.name.clone(), gap))
             }
             _ => None,

@@ -7,34 +7,14 @@ use crate::algo::{ppo::Backend, ppo::PpoConfig, trex::TrexConfig, trex::TrexLoss
 use crate::env::EnvId;
 use crate::nn::reward::Composition;
 use crate::nn::{Device, DeviceChoice};
+pub use crate::pipeline::config::error::{ConfigError, locate};
+use crate::pipeline::config::settings::{self, Setting, Source};
 use crate::pipeline::config::*;
 
 /// Stored bytes are idrex's own kernels' (the same on every processor); libtorch's PPO
 /// update is a reference for the tests, not a stage.
 const TCH_BACKEND: &str = "ppo.backend tch computes with libtorch's kernels, whose bytes depend on the processor, so no stage uses it; \
                            remove it (fused, the default, computes the same update)";
-
-/// A pipeline mistake, located in its file.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ConfigError {
-    pub file: PathBuf,
-    pub line: usize,
-    pub column: usize,
-    pub message: String,
-    /// Further mistakes in the same file, each shown on its own line.
-    pub also: Vec<ConfigError>,
-}
-
-impl std::fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        // Each problem on one line: a quoted value's line breaks are escaped.
-        write!(f, "{}:{}:{}: {}", self.file.display(), self.line, self.column, crate::error::one_line(self.message.clone()))?;
-        for e in &self.also {
-            write!(f, "\n{e}")?;
-        }
-        Ok(())
-    }
-}
 
 /// A validated pipeline with everything resolved.
 #[derive(Debug, Clone)]
@@ -55,28 +35,9 @@ pub struct Pipeline {
     pub replicate: usize,
     /// The file's `device`, resolved on this machine ([`Pipeline::on`] overrides it).
     pub device: Device,
-}
-
-/// Where a key path is in the YAML text: the line and column of its last key, found by
-/// tracking the chain of enclosing keys by indentation; (1, 1) when not found.
-fn locate(text: &str, path: &[&str]) -> (usize, usize) {
-    let mut stack: Vec<(usize, String)> = Vec::new();
-    for (i, line) in text.lines().enumerate() {
-        let trimmed = line.trim_start();
-        if trimmed.is_empty() || trimmed.starts_with('#') || trimmed.starts_with('-') {
-            continue;
-        }
-        let Some((key, _)) = trimmed.split_once(':') else { continue };
-        let indent = line.len() - trimmed.len();
-        while stack.last().is_some_and(|(d, _)| *d >= indent) {
-            stack.pop();
-        }
-        stack.push((indent, key.trim().to_string()));
-        if stack.len() == path.len() && stack.iter().zip(path).all(|((_, k), p)| k == p) {
-            return (i + 1, indent + 1);
-        }
-    }
-    (1, 1)
+    /// Which variant of a sweep this is (recorded in its evaluations); None for the file
+    /// itself.
+    pub variant: Option<crate::pipeline::stage::eval::VariantTag>,
 }
 
 impl Pipeline {
@@ -87,14 +48,37 @@ impl Pipeline {
             column: 0,
             message: format!("cannot read the pipeline file: {e}"),
             also: vec![],
+            setting: None,
         })?;
         Self::parse(path, &text)
     }
 
     pub fn parse(path: &Path, text: &str) -> Result<Pipeline, ConfigError> {
-        let at = |keys: &[&str], message: String| {
-            let (line, column) = locate(text, keys);
-            ConfigError { file: path.into(), line, column, message, also: vec![] }
+        Self::parse_with(path, text, &[])
+    }
+
+    /// The file `text` with `settings` applied ([`settings::apply`]; a sweep's variant or the
+    /// command line's `-S`): each check on a field a setting gave names that setting.
+    pub fn parse_with(path: &Path, text: &str, settings: &[Setting]) -> Result<Pipeline, ConfigError> {
+        let error = |s: &Setting, message: String| match s.source {
+            Source::CommandLine => {
+                ConfigError { file: path.into(), line: 0, column: 0, message, also: vec![], setting: Some(s.describe()) }
+            }
+            Source::Sweep { line, column } => ConfigError {
+                file: path.into(),
+                line,
+                column,
+                message: format!("{}: {message}", s.describe()),
+                also: vec![],
+                setting: None,
+            },
+        };
+        let at = |keys: &[&str], message: String| match settings.iter().rev().find(|s| s.covers(keys)) {
+            Some(s) => error(s, message),
+            None => {
+                let (line, column) = locate(text, keys);
+                ConfigError { file: path.into(), line, column, message, also: vec![], setting: None }
+            }
         };
         if let Ok(doc) = serde_yaml::from_str::<serde_yaml::Value>(text)
             && let Some(keys) = non_finite(&doc, &mut Vec::new())
@@ -118,8 +102,12 @@ impl Pipeline {
             } else {
                 ""
             };
-            ConfigError { file: path.into(), line, column, message: format!("{msg}{hint}"), also: vec![] }
+            ConfigError { file: path.into(), line, column, message: format!("{msg}{hint}"), also: vec![], setting: None }
         })?;
+        let spec = match settings {
+            [] => spec,
+            _ => settings::apply(text, settings).map_err(|(i, message)| error(&settings[i], message))?,
+        };
         // Every semantic mistake is collected, so that one run of the command lists them all.
         let mut problems: Vec<ConfigError> = Vec::new();
         let mut bad = |keys: &[&str], message: String| problems.push(at(keys, message));
@@ -235,6 +223,14 @@ impl Pipeline {
                 _ => {}
             }
         }
+        if spec.role == Role::Test && (!settings.is_empty() || spec.sweep.is_some()) {
+            bad(
+                &["role"],
+                "role: test locks its seeds to one configuration; run a sweep or -S settings on tuning seeds, \
+                 and write the chosen settings into the test set's file"
+                    .into(),
+            );
+        }
         if spec.ppo.backend == Backend::Tch {
             bad(&["ppo", "backend"], TCH_BACKEND.into());
         }
@@ -336,7 +332,7 @@ impl Pipeline {
         };
         let device = spec.device.resolve();
         let replicates = first_replicate..first_replicate + replicates;
-        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, replicates, replicate: 0, device })
+        Ok(Pipeline { file: path.into(), name, env, envs, store, spec, composition, replicates, replicate: 0, device, variant: None })
     }
 
     /// This pipeline computing on the device `choice` resolves to (the command line's

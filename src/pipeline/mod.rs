@@ -5,7 +5,8 @@
 //!
 //! The layers, lowest first (each imports only those before it): [`kind`] (the stage kinds'
 //! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
-//! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG),
+//! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG), [`sweep`]
+//! (a file's variants, their graphs joined),
 //! [`schedule`] and [`cores`] (ordering and threads), [`test_set`] (locked test sets),
 //! [`gaps`] (BC far below its demonstrations), [`runner`], [`slurm`], [`recompute`] and
 //! [`plots`].
@@ -23,8 +24,10 @@ pub mod runner;
 pub mod schedule;
 pub mod slurm;
 pub mod stage;
+pub mod sweep;
 pub mod test_set;
 
 pub use config::Method;
 pub use graph::{Graph, Node, expand};
 pub use load::Pipeline;
+pub use sweep::Sweep;

@@ -4,7 +4,9 @@
 //! true return for the demonstrations, the training set and unseen evaluation rollouts
 //! (Figures 6, 8, 11), PPO learning curves, and T-REX loss and accuracy.
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use super::Sweep;
 
 use super::config::Method;
 use super::graph::Graph;
@@ -67,6 +69,43 @@ fn checkpoint_curves(rec: &Recording, g: &Graph, metrics: &dyn Fn(&str) -> Optio
             }
         }
     }
+}
+
+/// One recording per variant and environment, each holding that pipeline's nodes under the
+/// names its own file would give them (outcomes are matched by key).
+pub fn record_sweep(sweep: &Sweep, recording: Option<&Path>, outcomes: &[Outcome], store: &Store) -> Result<Vec<String>> {
+    let by_key: BTreeMap<&str, &Outcome> = outcomes.iter().map(|o| (o.key.as_str(), o)).collect();
+    let mut recordings = Vec::new();
+    for v in &sweep.variants {
+        let p = &v.pipeline;
+        let own = super::expand(p)?;
+        let own_keys = own.keys();
+        for &env in &p.envs {
+            let stem = if sweep.is_sweep() { format!("{}-{}", p.name, env.name()) } else { env.name().to_string() };
+            let rec = match recording {
+                Some(r) if !p.is_study() && !sweep.is_sweep() => r.to_path_buf(),
+                Some(r) => r.with_file_name(format!("{}-{stem}.rrd", r.file_stem().unwrap_or_default().to_string_lossy())),
+                None => PathBuf::from("recordings").join(format!("{}-{}.rrd", p.name, env.name())),
+            };
+            if let Some(dir) = rec.parent() {
+                std::fs::create_dir_all(dir).ok();
+            }
+            let prefix = if p.is_study() { format!("{}/", env.name()) } else { String::new() };
+            let sub = own.subgraph(&prefix);
+            let mine: Vec<Outcome> = own
+                .nodes
+                .iter()
+                .filter_map(|n| {
+                    let o = by_key.get(own_keys[&n.name].as_str())?;
+                    n.name.strip_prefix(&prefix).map(|name| Outcome { node: name.to_string(), ..(*o).clone() })
+                })
+                .collect();
+            record(&sub, &mine, store, &rec, &p.name)?;
+            println!("recording: {}", rec.display());
+            recordings.push(rec.display().to_string());
+        }
+    }
+    Ok(recordings)
 }
 
 /// Writes the recording next to `path` and renames it into place, so that a failure (a full

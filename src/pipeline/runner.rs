@@ -151,6 +151,40 @@ fn run_node(
     }
 }
 
+/// One line: what the run will do, and how long it should take here (estimated from the
+/// store's stage times where it has them, else the reference machine's; see
+/// [`crate::pipeline::schedule`]).
+pub fn intent(sweep: &super::Sweep, manifests: &[Manifest], g: &Graph, opts: &RunOptions) -> String {
+    use super::schedule::{Estimates, makespan};
+    let p = &sweep.file;
+    let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
+    let keys = g.keys();
+    let todo = |n: &Node| !present.contains(keys[&n.name].as_str()) || opts.force.contains(&n.name);
+    let est = Estimates::from_manifests(manifests);
+    let wall = makespan(g, &|n| if todo(n) { est.seconds(n) } else { 0.0 }, opts.jobs.max(1));
+    let kinds: std::collections::BTreeSet<_> = g.nodes.iter().filter(|n| todo(n)).map(|n| n.kind()).collect();
+    let source =
+        if kinds.iter().all(|k| est.measured(*k)) { "this store's stage times" } else { "the 2-core reference machine's stage times" };
+    let methods: Vec<&str> = p.spec.methods.iter().map(|m| m.label()).collect();
+    let envs: Vec<&str> = p.envs.iter().map(|e| e.name()).collect();
+    let mut replicates = if p.is_replicated() { format!(", {} replicates", p.replicates.len()) } else { String::new() };
+    if sweep.is_sweep() {
+        replicates.push_str(&format!(", {} variants (against `{}`)", sweep.variants.len(), sweep.baseline));
+    }
+    let to_compute = g.nodes.iter().filter(|n| todo(n)).count();
+    format!(
+        "{}: {} on {}, {} RL runs per method, K = {}{replicates}: {} stages, {to_compute} to compute; about {} with {} jobs (from {source})",
+        p.name,
+        methods.join(", "),
+        envs.join(", "),
+        p.spec.seeds.len(),
+        p.spec.iterations,
+        g.nodes.len(),
+        minutes(wall),
+        opts.jobs
+    )
+}
+
 /// A duration for people: seconds under a minute, else whole minutes.
 pub fn minutes(seconds: f64) -> String {
     if seconds < 60.0 { format!("{:.0} s", seconds.max(0.0)) } else { format!("{:.0} min", seconds / 60.0) }

@@ -208,4 +208,18 @@ mod tests {
         let e = check_text(&test, &used, &[], false).unwrap_err().to_string();
         assert!(e.contains("role: test") && e.contains("study `other`"), "{e}");
     }
+
+    /// Each variant of a sweep is a configuration: a sweep on a test set's seeds is refused like
+    /// any other second configuration, and a test set's file cannot sweep.
+    #[test]
+    fn a_sweep_on_a_test_sets_seeds_is_refused() {
+        let test = format!("{BASE}name: locked\nrole: test\n");
+        let looks = Looks::new(&stored_evals(&test, Some(TestSetMark::Test { study: "locked".into() })));
+        let path = std::path::Path::new("p.yaml");
+        let sweep = super::super::Sweep::parse(path, &format!("{BASE}name: tune\n"), &["reward.ceiling=0.5,none".into()]).unwrap();
+        let e = check(&sweep.file, &sweep.graph().unwrap(), &looks, &|_| false, false).unwrap_err().to_string();
+        assert!(e.contains("test set `locked`") && e.contains("--reuse-test-set"), "{e}");
+        let e = super::super::Sweep::parse(path, &test, &["reward.ceiling=0.5,none".into()]).unwrap_err().to_string();
+        assert!(e.contains("role: test locks its seeds to one configuration"), "{e}");
+    }
 }

@@ -248,7 +248,7 @@ pub fn write(
     let mut written = Vec::new();
     let groups_demos: BTreeMap<(String, String), f64> = groups.iter().filter_map(|(k, g)| g.demos.map(|d| (k.clone(), d.0))).collect();
     for ((env, pipeline), mut g) in groups {
-        let slug = format!("{}-{}", env.to_lowercase(), pipeline).replace(['/', ' '], "_");
+        let slug = format!("{}-{}", env.to_lowercase(), pipeline).replace(['/', ' ', '[', ']', ',', '='], "_");
         let mut emit = |fig: &dyn Fn(&Path, &str) -> Result<String>, name: &str| -> Result<()> {
             let stem = format!("{slug}-{name}");
             let title = fig(dir, &stem)?;
@@ -295,7 +295,7 @@ pub fn write(
     let mut studies: Vec<(&str, &str)> = aggregate.iter().map(|a| (a.env.as_str(), a.study.as_str())).collect();
     studies.dedup();
     for (env, study) in studies {
-        let slug = format!("{}-study-{}", env.to_lowercase(), study).replace(['/', ' '], "_");
+        let slug = format!("{}-study-{}", env.to_lowercase(), study).replace(['/', ' ', '[', ']', ',', '='], "_");
         // The demonstrations of the study's first table (every table of a study has the same).
         let demos = protocols
             .iter()

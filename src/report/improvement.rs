@@ -20,6 +20,10 @@ pub fn improvement_cell(i: &Improvement) -> String {
         1 => ", 1 tie".to_string(),
         n => format!(", {n} ties"),
     };
+    if i.pairs == i.ties {
+        // No replicate decides: the paired rate and its test are not measured.
+        return format!("P {:.2} [{:.2}, {:.2}]; all {} replicates tie{warn}", i.unpaired, i.unpaired_ci.0, i.unpaired_ci.1, i.pairs);
+    }
     format!(
         "P {:.2} [{:.2}, {:.2}]; {} of {} [{:.2}, {:.2}], p = {:.3}{ties}{warn}",
         i.unpaired,

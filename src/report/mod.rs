@@ -18,13 +18,13 @@ mod notes;
 mod protocols;
 mod returns;
 pub mod studies;
+pub mod sweeps;
 pub mod terms;
 #[cfg(test)]
 mod tests;
 
 use polars::prelude::*;
 
-use crate::algo::scoring::CheckpointEval;
 use crate::error::{Error, Result};
 use crate::log::table::Table;
 use crate::pipeline::Method;
@@ -36,7 +36,7 @@ pub use crate::algo::scoring::{Selection, select};
 use crate::pipeline::role::Role;
 pub use notes::notes;
 use protocols::RESAMPLES;
-pub use protocols::{Protocol, ProtocolRow};
+pub use protocols::{Protocol, ProtocolRow, over_checkpoints};
 use protocols::{RunEval, protocol_rows};
 pub use returns::{AccuracyRow, DemoRow, ReturnRow, markdown};
 
@@ -76,26 +76,8 @@ struct Long {
     runs: BTreeMap<(String, TableId, String), Vec<RunEval>>,
     /// (env, table label) -> the demonstrations' returns.
     demo_returns: BTreeMap<(String, String), Vec<f64>>,
-}
-
-/// How well the learned reward tracks one PPO run's own policies over training: the
-/// `correlation` (Spearman or Pearson), over the checkpoints, of the ensemble-mean learned
-/// return with the true return, each the mean over the checkpoint's evaluation episodes
-/// (NaN without learned scores). Negative means PPO climbing the learned reward walked down
-/// the true one. These policies are trajectories T-REX never saw, from poor to trained:
-/// Pearson over them is the number SSRR reports as the reward's correlation with the true
-/// return (SSRR pools single episodes, and its training set, where this takes checkpoint
-/// means).
-pub fn over_checkpoints(checkpoints: &[CheckpointEval], correlation: fn(&[f64], &[f64]) -> f64) -> f64 {
-    let scored: Vec<(f64, f64)> = checkpoints
-        .iter()
-        .filter_map(|c| c.learned.map(|l| (l.mean, c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64)))
-        .collect();
-    if scored.len() < 2 || scored.len() != checkpoints.len() {
-        return f64::NAN;
-    }
-    let (learned, truth): (Vec<f64>, Vec<f64>) = scored.into_iter().unzip();
-    correlation(&learned, &truth)
+    /// Study -> its place in a sweep.
+    variants: BTreeMap<String, crate::pipeline::stage::eval::VariantTag>,
 }
 
 /// The store's intact artifacts, read and verified once, and any archives' manifests
@@ -148,6 +130,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let mut demo_keys = std::collections::BTreeSet::new();
     let mut runs: BTreeMap<(String, TableId, String), Vec<RunEval>> = BTreeMap::new();
     let mut demo_returns: BTreeMap<(String, String), Vec<f64>> = BTreeMap::new();
+    let mut variants = BTreeMap::new();
     let mut seen: BTreeMap<(String, TableId, String, usize), String> = BTreeMap::new();
     // (env, study) -> where each of its tables' demonstrations came from.
     let mut demo_sources: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
@@ -166,6 +149,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
         let e = p.env.name().to_string();
         let label = method_label(p.method, p.iteration);
         let table = TableId { label: p.table(), study: p.pipeline.clone(), replicate: p.replicate };
+        variants.extend(p.variant.clone().map(|v| (p.pipeline.clone(), v)));
         for &r in &x.summary.returns {
             env.push(e.clone());
             method.push(label.clone());
@@ -238,6 +222,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
     let df = |cols: Vec<Column>| DataFrame::new_infer_height(cols).map_err(pe);
     Ok(Long {
         demo_returns,
+        variants,
         episodes: df(vec![
             Column::new("env".into(), env),
             Column::new("pipeline".into(), pipeline),
@@ -275,6 +260,8 @@ pub struct Tables {
     pub aggregate: Vec<studies::AggregateRow>,
     /// Their probabilities of improvement over D-REX and over BC.
     pub improvement: Vec<studies::ImprovementRow>,
+    /// Sweeps' variants, each against its baseline variant.
+    pub sweeps: Vec<sweeps::SweepRow>,
     /// Multi-BC's clones against their sources.
     pub clones: Vec<clones::CloneRow>,
     /// (env, table) -> the demonstrations' returns.
@@ -303,6 +290,9 @@ impl Tables {
             out.push(("aggregate", Table::of(&self.aggregate)));
             out.push(("improvement", Table::of(&self.improvement)));
         }
+        if !self.sweeps.is_empty() {
+            out.push(("sweeps", Table::of(&self.sweeps)));
+        }
         if !self.looks.is_empty() {
             out.push(("looks", Table::of(&self.looks)));
         }
@@ -324,6 +314,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         protocols.extend(protocol_rows(env, table, method, runs));
     }
     let (aggregate, improvement) = studies::aggregate(&protocols, &long.demo_returns);
+    let sweeps = sweeps::rows(&aggregate, &long.variants);
     let keys = [col("env"), col("pipeline"), col("method")];
     let per_run = long
         .episodes
@@ -422,6 +413,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         protocols,
         aggregate,
         improvement,
+        sweeps,
         clones: clones::rows(store),
         demo_returns: long.demo_returns,
         looks: looks::rows(store),

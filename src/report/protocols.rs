@@ -180,3 +180,23 @@ impl Row for ProtocolRow {
         ]
     }
 }
+
+/// How well the learned reward tracks one PPO run's own policies over training: the
+/// `correlation` (Spearman or Pearson), over the checkpoints, of the ensemble-mean learned
+/// return with the true return, each the mean over the checkpoint's evaluation episodes
+/// (NaN without learned scores). Negative means PPO climbing the learned reward walked down
+/// the true one. These policies are trajectories T-REX never saw, from poor to trained:
+/// Pearson over them is the number SSRR reports as the reward's correlation with the true
+/// return (SSRR pools single episodes, and its training set, where this takes checkpoint
+/// means).
+pub fn over_checkpoints(checkpoints: &[CheckpointEval], correlation: fn(&[f64], &[f64]) -> f64) -> f64 {
+    let scored: Vec<(f64, f64)> = checkpoints
+        .iter()
+        .filter_map(|c| c.learned.map(|l| (l.mean, c.returns.iter().sum::<f64>() / c.returns.len().max(1) as f64)))
+        .collect();
+    if scored.len() < 2 || scored.len() != checkpoints.len() {
+        return f64::NAN;
+    }
+    let (learned, truth): (Vec<f64>, Vec<f64>) = scored.into_iter().unzip();
+    correlation(&learned, &truth)
+}

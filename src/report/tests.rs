@@ -62,6 +62,7 @@ fn store() -> Artifacts {
             iteration: if method == Method::Bc { 0 } else { 1 },
             run,
             replicate: r,
+            variant: None,
         };
         let bc = EvalMetrics { summary: summary(&[890.0 + base, 910.0 + base]), reward: None, checkpoints: vec![] };
         add(manifest(&format!("bc{r}"), &Params::Eval(eval(Method::Bc, 0)), &Metrics::Eval(bc), &[("demos", &demos)]));

@@ -1,8 +1,10 @@
 //! Pipeline files' schema, version 1: the structs a YAML file deserialises into, each field
 //! documented here once (`docs/pipelines.md` is checked against them). Reading and checking
 //! a file is [`crate::pipeline::load`].
+pub mod error;
 mod idrex;
 pub mod schema;
+pub mod settings;
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -332,6 +334,11 @@ pub struct PipelineFile {
     /// sees one), `cpu` or `cuda`. A GPU stage has `device: cuda` in its key.
     #[serde(default)]
     pub device: DeviceChoice,
+    /// The variants the file runs as (`pipeline run` expands each into its own study,
+    /// `[settings]` after the name; stages whose keys agree are computed once). Not part of
+    /// any key: each variant's keys are those of the file with its settings written in.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep: Option<settings::SweepConfig>,
 }
 
 /// What a pipeline file is for ([`PipelineFile::role`]).

@@ -113,6 +113,7 @@ fn eval_params(p: &Pipeline, method: Method, iteration: usize, run: usize) -> Pa
         iteration,
         run,
         replicate: p.replicate,
+        variant: p.variant.clone(),
     })
 }
 

@@ -32,6 +32,25 @@ pub struct EvalParams {
     /// for replicate 0, whose keys are those of a file without replicates.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub replicate: usize,
+    /// The sweep variant the run belongs to (absent outside sweeps, and for the variant that
+    /// sets nothing: the file itself).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variant: Option<VariantTag>,
+}
+
+/// A sweep variant's place in its sweep, recorded in its evaluations: the report and `exp
+/// show` group studies by it and compare each variant with the baseline.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VariantTag {
+    /// The sweep's name: the pipeline file's.
+    pub sweep: String,
+    /// What tells the variant apart: its name, or its settings (`reward.ceiling=0.5`).
+    pub label: String,
+    /// Every field it sets, `path=value`, in the order applied.
+    pub settings: Vec<String>,
+    /// The study (`pipeline` name) it is compared against.
+    pub baseline: String,
 }
 
 fn is_zero(r: &usize) -> bool {
