@@ -42,15 +42,7 @@ pub struct Pipeline {
 
 impl Pipeline {
     pub fn load(path: &Path) -> Result<Pipeline, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
-            file: path.into(),
-            line: 0,
-            column: 0,
-            message: format!("cannot read the pipeline file: {e}"),
-            also: vec![],
-            setting: None,
-        })?;
-        Self::parse(path, &text)
+        Self::parse(path, &crate::pipeline::config::error::read(path)?)
     }
 
     pub fn parse(path: &Path, text: &str) -> Result<Pipeline, ConfigError> {

@@ -38,15 +38,7 @@ fn arg_error(path: &Path, message: String) -> ConfigError {
 impl Sweep {
     /// The file at `path` with the command line's `-S` arguments.
     pub fn load(path: &Path, args: &[String]) -> Result<Sweep, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
-            file: path.into(),
-            line: 0,
-            column: 0,
-            message: format!("cannot read the pipeline file: {e}"),
-            also: vec![],
-            setting: None,
-        })?;
-        Self::parse(path, &text, args)
+        Self::parse(path, &super::config::error::read(path)?, args)
     }
 
     pub fn parse(path: &Path, text: &str, args: &[String]) -> Result<Sweep, ConfigError> {

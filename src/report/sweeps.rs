@@ -80,50 +80,19 @@ pub fn rows(aggregate: &[AggregateRow], tags: &BTreeMap<String, VariantTag>) -> 
     out
 }
 
-/// `sweeps.csv`: one row per (sweep, env, protocol, variant, method).
+/// `sweeps.csv`: one row per (sweep, env, protocol, variant, method): the sweep, the
+/// variant's settings and baseline, its `aggregate.csv` row, and the comparison's columns.
 impl Row for SweepRow {
     fn header() -> Vec<&'static str> {
-        let mut h = vec![
-            "sweep",
-            "env",
-            "protocol",
-            "study",
-            "settings",
-            "method",
-            "replicates",
-            "runs",
-            "mean",
-            "mean_ci_low",
-            "mean_ci_high",
-            "iqm",
-            "iqm_ci_low",
-            "iqm_ci_high",
-            "baseline",
-        ];
+        let mut h = vec!["sweep", "settings", "baseline"];
+        h.extend(AggregateRow::header());
         h.extend(super::improvement::COLUMNS.iter().map(|c| if *c == "replicates" { "paired_replicates" } else { c }));
         h
     }
 
     fn cells(&self) -> Vec<Cell> {
-        let a = &self.aggregate;
-        let x = |v: f64| Cell::opt(Some(v), 1);
-        let mut c = vec![
-            Cell::text(&self.sweep),
-            Cell::text(&self.env),
-            Cell::text(self.protocol.name()),
-            Cell::text(&self.study),
-            Cell::text(&self.settings),
-            Cell::text(&self.method),
-            Cell::int(a.replicates),
-            Cell::int(a.runs),
-            x(a.mean),
-            x(a.mean_ci.0),
-            x(a.mean_ci.1),
-            x(a.iqm),
-            x(a.iqm_ci.0),
-            x(a.iqm_ci.1),
-            Cell::text(&self.baseline),
-        ];
+        let mut c = vec![Cell::text(&self.sweep), Cell::text(&self.settings), Cell::text(&self.baseline)];
+        c.extend(self.aggregate.cells());
         match &self.against_baseline {
             Some(i) => c.extend(super::improvement::cells(i)),
             None => c.extend(std::iter::repeat_n(Cell::Num(None, 3), super::improvement::COLUMNS.len())),
@@ -210,6 +179,7 @@ mod tests {
         assert!(md.contains("| s[c=0.5] | c=0.5 | drex | 3 (3) | 6.0 [") && md.contains("P 1.00"), "{md}");
         let csv = Table::of(&out).csv();
         assert_eq!(csv.lines().count(), 4, "{csv}");
-        assert!(csv.lines().next().unwrap().contains(",baseline,paired_replicates,rliable_probability,"), "{csv}");
+        assert!(csv.lines().next().unwrap().starts_with("sweep,settings,baseline,env,study,method,protocol,replicates,"), "{csv}");
+        assert!(csv.lines().next().unwrap().contains(",paired_replicates,rliable_probability,"), "{csv}");
     }
 }

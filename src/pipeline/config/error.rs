@@ -52,3 +52,15 @@ pub fn locate(text: &str, path: &[&str]) -> (usize, usize) {
     }
     (1, 1)
 }
+
+/// The text of the pipeline file at `path`, or the error that names it.
+pub fn read(path: &std::path::Path) -> Result<String, ConfigError> {
+    std::fs::read_to_string(path).map_err(|e| ConfigError {
+        file: path.into(),
+        line: 0,
+        column: 0,
+        message: format!("cannot read the pipeline file: {e}"),
+        also: vec![],
+        setting: None,
+    })
+}
