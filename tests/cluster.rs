@@ -115,18 +115,15 @@ fn submitted(out: &str) -> Vec<String> {
 const NAME: &str = "pipelines_run_as_slurm_jobs_against_an_s3_store";
 
 /// A test binary's command line as cargo test and nextest pass it: `--list` lists the test,
-/// a name filter that does not match it runs nothing, other flags are accepted and ignored.
+/// a name filter that does not match it, or a `--skip` that does, runs nothing; libtest's
+/// other flags are accepted ([`util::libtest_selects`]).
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--list") {
         println!("{NAME}: test");
         return;
     }
-    let ignored = args.iter().any(|a| a == "--ignored");
-    let filters: Vec<&String> = args.iter().filter(|a| !a.starts_with('-')).collect();
-    let exact = args.iter().any(|a| a == "--exact");
-    let selected = filters.is_empty() || filters.iter().any(|f| if exact { f.as_str() == NAME } else { NAME.contains(f.as_str()) });
-    if ignored || !selected {
+    if !util::libtest_selects(NAME, &args) {
         println!("running 0 tests (cluster: {NAME} not selected)");
         return;
     }

@@ -30,3 +30,17 @@ fn a_skip_is_printed_through_the_capture_and_recorded() {
     assert!(stderr.contains(line), "the skip line got past the capture: {stderr}");
     assert_eq!(std::fs::read_to_string(&ledger).unwrap().trim(), line);
 }
+
+/// The cluster test, which has no libtest harness, reads libtest's command line as libtest
+/// does: `-- --test-threads 1` runs it (a flag's value is no filter), `--skip` and other
+/// names do not.
+#[test]
+fn the_cluster_test_reads_libtests_flags() {
+    use crate::util::libtest_selects;
+    let name = "pipelines_run_as_slurm_jobs_against_an_s3_store";
+    let sel = |args: &[&str]| libtest_selects(name, &args.iter().map(|a| a.to_string()).collect::<Vec<_>>());
+    assert!(sel(&[]) && sel(&["--test-threads", "1"]) && sel(&["--test-threads=1", "--nocapture"]) && sel(&["--color", "never"]));
+    assert!(sel(&["slurm"]) && sel(&["--exact", name]) && sel(&["other", "s3_store"]) && sel(&["--include-ignored"]));
+    assert!(!sel(&["--exact", "slurm"]) && !sel(&["nothing_here"]) && !sel(&["--ignored"]));
+    assert!(!sel(&["--skip", "slurm"]) && !sel(&["--skip=s3"]) && sel(&["--skip", "other"]) && !sel(&["--exact", "--skip", name]));
+}

@@ -134,3 +134,35 @@ pub fn computed(stdout: &str) -> usize {
         })
         .unwrap_or_else(|| panic!("no summary line in:\n{stdout}"))
 }
+
+/// Whether libtest's command line (as `cargo test` and nextest pass it) selects the test
+/// `name` of a binary without libtest's harness: name filters (substrings, whole names with
+/// `--exact`), `--skip` (repeatable), `--ignored` (runs only ignored tests: not this one) and
+/// `--list` (handled by the caller); the other flags are accepted, those with a value
+/// (`--test-threads 1`, `--color=never`) with it.
+pub fn libtest_selects(name: &str, args: &[String]) -> bool {
+    const WITH_VALUE: &[&str] = &["--test-threads", "--skip", "--color", "--format", "--logfile", "--shuffle-seed", "-Z"];
+    let (mut filters, mut skips) = (Vec::new(), Vec::new());
+    let (mut exact, mut ignored) = (false, false);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        let (flag, inline) = match a.split_once('=') {
+            Some((f, v)) if f.starts_with('-') => (f, Some(v.to_string())),
+            _ => (a.as_str(), None),
+        };
+        if WITH_VALUE.contains(&flag) {
+            let value = inline.or_else(|| it.next().cloned()).unwrap_or_default();
+            if flag == "--skip" {
+                skips.push(value);
+            }
+        } else if flag == "--exact" {
+            exact = true;
+        } else if flag == "--ignored" {
+            ignored = true;
+        } else if !flag.starts_with('-') {
+            filters.push(a.clone());
+        }
+    }
+    let matches = |f: &String| if exact { f == name } else { name.contains(f.as_str()) };
+    !ignored && (filters.is_empty() || filters.iter().any(matches)) && !skips.iter().any(matches)
+}
