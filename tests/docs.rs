@@ -76,7 +76,7 @@ fn concrete_commands(line: &str) -> Option<Result<Vec<Vec<String>>, String>> {
             "N" | "R" | "S" | "T" => "1",
             "FILE" if ext.is_empty() => "pipelines/smoke.yaml",
             "FILE" | "ACTIONS" | "STATE" | "OUT" => "out",
-            "STORE" => "artifacts",
+            "STORE" | "URL" => "artifacts",
             "ENV" | "E" | "ID" => "Hopper-v5",
             "D" => "cpu",
             "DIR" => "dir",
@@ -131,13 +131,81 @@ fn every_shown_command_parses_whole() {
         for line in std::fs::read_to_string(&page).unwrap().lines().filter(|l| l.starts_with("    ")) {
             let Some(variants) = concrete_commands(line) else { continue };
             let variants = variants.unwrap_or_else(|e| panic!("{}: {line}: {e}", page.display()));
-            // `logs list|show|export ... [--episode N]`: some choice parses with every option.
+            // Every choice of every `a|b|c`, with every optional group.
             let errors: Vec<String> = variants.iter().filter_map(|v| parses(v).err()).collect();
-            assert!(errors.len() < variants.len(), "{}: `{}` does not parse:\n{}", page.display(), line.trim(), errors[0]);
+            assert!(errors.is_empty(), "{}: `{}` does not parse:\n{}", page.display(), line.trim(), errors.join("\n"));
             checked += 1;
         }
     }
     assert!(checked >= 25, "{checked} command lines");
+}
+
+/// The `idrex ...` and `./dev ...` spans of a page's inline code (`` `idrex gc FILE` ``), with
+/// each `<described placeholder>` made one placeholder word; `ARGS...` stands for anything.
+fn inline_commands(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for (i, span) in text.split('`').enumerate() {
+        if i % 2 == 1 && (span.starts_with("idrex ") || span.starts_with("./dev ")) && !span.contains("ARGS") {
+            let mut line = String::new();
+            let mut rest = span;
+            while let Some(open) = rest.find('<') {
+                let Some(close) = rest[open..].find('>') else { break };
+                line.push_str(&rest[..open]);
+                line.push_str("<key>");
+                rest = &rest[open + close + 1..];
+            }
+            line.push_str(rest);
+            out.push(line);
+        }
+    }
+    out
+}
+
+/// Whether `idrex <args>` parses as far as it goes: an inline span may leave out what a
+/// command requires (`idrex gc`, `idrex report --bc-warning`), but a subcommand, a flag or a
+/// value that does not exist fails.
+fn parses_as_far_as_it_goes(args: &[String]) -> Result<(), String> {
+    use clap::Parser;
+    use clap::error::ErrorKind;
+    match idrex::cli::Cli::try_parse_from(std::iter::once("idrex".to_string()).chain(args.iter().cloned())) {
+        Ok(_) => Ok(()),
+        Err(e)
+            if matches!(
+                e.kind(),
+                ErrorKind::MissingRequiredArgument | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand | ErrorKind::DisplayVersion
+            ) =>
+        {
+            Ok(())
+        }
+        // A flag named without its value.
+        Err(e) if e.kind() == ErrorKind::InvalidValue && args.last().is_some_and(|a| a.starts_with("--")) => Ok(()),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+#[test]
+fn every_inline_command_parses_as_far_as_it_goes() {
+    let mut checked = 0;
+    for page in pages() {
+        let text = std::fs::read_to_string(&page).unwrap();
+        for span in inline_commands(&text) {
+            let Some(variants) = concrete_commands(&span) else { continue };
+            let variants = variants.unwrap_or_else(|e| panic!("{}: `{span}`: {e}", page.display()));
+            let errors: Vec<String> = variants.iter().filter_map(|v| parses_as_far_as_it_goes(v).err()).collect();
+            assert!(errors.is_empty(), "{}: `{span}` does not parse:\n{}", page.display(), errors.join("\n"));
+            checked += 1;
+        }
+    }
+    assert!(checked >= 25, "{checked} inline commands");
+    // What it refuses: a misspelled subcommand, flag or value; what it lets through: a
+    // fragment that stops before a required argument or a flag's value.
+    let check = |span: &str| parses_as_far_as_it_goes(&concrete_commands(span).unwrap().unwrap()[0]);
+    assert!(check("idrex gc").is_ok() && check("idrex report --bc-warning").is_ok() && check("idrex env rollout").is_ok());
+    assert!(check("idrex gcc").is_err() && check("idrex report --bc-warnings 0.5").is_err() && check("idrex report --format pdf").is_err());
+    assert_eq!(
+        inline_commands("run `idrex bench trex --policy <a BC policy> --seeds 5` or `idrex ARGS...`"),
+        ["idrex bench trex --policy <key> --seeds 5"]
+    );
 }
 
 #[test]
