@@ -1,6 +1,7 @@
 //! idrex: reward learning from automatically ranked demonstrations (D-REX, iD-REX).
 //!
-//! Data flow, one module per stage:
+//! Data flow (each stage's parameters, metrics and body in `pipeline::stage::<kind>`, its
+//! algorithm under `algo`):
 //!
 //! ```text
 //! env ──> demos ──> bc ──> noise rollouts ──> trex ──> ppo ──> evaluation rollouts

@@ -68,7 +68,7 @@ fn concrete_commands(line: &str) -> Option<Result<Vec<Vec<String>>, String>> {
         // brackets (<key>).
         let stem = w.trim_start_matches('<').trim_end_matches('>');
         let (name, ext) = stem.split_once('.').unwrap_or((stem, ""));
-        let placeholder = w.starts_with('<') || (name.len() > 0 && name.chars().all(|c| c.is_ascii_uppercase()));
+        let placeholder = w.starts_with('<') || (!name.is_empty() && name.chars().all(|c| c.is_ascii_uppercase()));
         if !placeholder {
             return Ok(w.to_string());
         }
@@ -333,7 +333,7 @@ fn analysis_studies_share_one_layout() {
                 if p.is_dir() {
                     stack.push(p);
                 } else {
-                    assert!(!p.extension().is_some_and(|x| x == "png"), "{}: figures are committed as SVG", p.display());
+                    assert!(p.extension().is_none_or(|x| x != "png"), "{}: figures are committed as SVG", p.display());
                 }
             }
         }

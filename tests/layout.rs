@@ -156,7 +156,7 @@ fn imports(module: &str, path: &Path, known: &BTreeMap<String, PathBuf>) -> BTre
         let lines: Vec<&str> = stmt.lines().collect();
         let item = |l: &str| ["use ", "pub use ", "pub(crate) use "].iter().find_map(|k| l.trim_start().strip_prefix(k)).is_some();
         if let Some(at) = lines.iter().rposition(|l| item(l)) {
-            let first = lines[at].trim_start().splitn(2, "use ").nth(1).unwrap_or("");
+            let first = lines[at].trim_start().split_once("use ").map(|x| x.1).unwrap_or("");
             let tree = std::iter::once(first).chain(lines[at + 1..].iter().copied()).collect::<Vec<_>>().join(" ");
             paths.extend(use_paths(&tree));
         }

@@ -546,7 +546,7 @@ fn bytes_depend_on_the_key_alone() {
         .unwrap();
     let curve = ppo.join("curve.csv");
     let mut text = std::fs::read_to_string(&curve).unwrap();
-    text.push_str("\n");
+    text.push('\n');
     std::fs::write(&curve, &text).unwrap();
     let mpath = ppo.join("manifest.json");
     let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&mpath).unwrap()).unwrap();

@@ -24,7 +24,7 @@ fn smoke_with(dir: &Path, section: &str, body: &str) -> PathBuf {
         out.push_str(line);
         out.push('\n');
     }
-    let path = dir.join(&format!("{section}.yaml"));
+    let path = dir.join(format!("{section}.yaml"));
     std::fs::write(&path, out).unwrap();
     path
 }

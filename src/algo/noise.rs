@@ -142,7 +142,7 @@ impl<A> TimeCorrelated<A> {
 impl<A: Actor> Actor for TimeCorrelated<A> {
     fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
         self.inner.act(obs, rng, out);
-        if self.step % self.period == 0 {
+        if self.step.is_multiple_of(self.period) {
             for n in &mut self.noise {
                 *n = self.sigma * rng.sample::<f64, _>(StandardNormal);
             }

@@ -125,7 +125,7 @@ pub fn select(runs: &[&[CheckpointEval]]) -> Selection {
 fn argmax(steps: &[usize], score: impl Fn(usize) -> Option<f64>) -> Option<usize> {
     let mut best: Option<(usize, f64)> = None;
     for &s in steps {
-        let Some(v) = score(s) else { return None };
+        let v = score(s)?;
         if best.is_none_or(|(_, b)| v > b) {
             best = Some((s, v));
         }

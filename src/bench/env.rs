@@ -23,7 +23,7 @@ pub struct EnvBenchArgs {
     /// Threads for the parallel vectorised measurement.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
-    /// Python with gymnasium[mujoco] for the Gymnasium baseline; "none" skips it.
+    /// Python with `gymnasium[mujoco]` for the Gymnasium baseline; "none" skips it.
     #[arg(long)]
     pub python: Option<String>,
     /// Python with EnvPool 1.2.5 (`analysis/envpool/env.sh` prints it): measure EnvPool's

@@ -126,11 +126,11 @@ pub fn run(cmd: &ExpCommand) -> anyhow::Result<()> {
             let (params, metrics) = (diff::params(a, b), diff::metrics(a, b, &args.out.protocols()));
             match args.out.format() {
                 Format::Csv => print!("{}", metrics.csv()),
-                Format::Json => print!("{{\"params\": {}, \"metrics\": {}}}\n", params.json().trim_end(), metrics.json().trim_end()),
+                Format::Json => println!("{{\"params\": {}, \"metrics\": {}}}", params.json().trim_end(), metrics.json().trim_end()),
                 f => {
                     let md = f == Format::Markdown;
                     let head = |t: &str| if md { format!("## {t}\n\n") } else { format!("{t}\n\n") };
-                    print!("{}{}\n", head(&format!("Parameters that differ ({})", params.rows.len())), params.write(f));
+                    println!("{}{}", head(&format!("Parameters that differ ({})", params.rows.len())), params.write(f));
                     print!("{}{}", head(&format!("`{}` against `{}`", a.name, b.name)), metrics.write(f));
                     if f == Format::Text {
                         print!("{}", crate::report::improvement::LEGEND);

@@ -1,6 +1,6 @@
 //! The command line: clap definitions and a thin function per command, one file per command
-//! group; the work is done by library functions. `anyhow` lives here and in `main.rs` only;
-//! the library returns [`crate::Error`].
+//! group; the work is done by library functions. `anyhow` lives at the binary's edge: here,
+//! `main.rs` and the benchmarks (`bench`, commands too); the library returns [`crate::Error`].
 mod env;
 mod exp;
 mod logs;

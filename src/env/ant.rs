@@ -4,7 +4,7 @@
 //! |---|---|
 //! | model | `ant.xml` (timestep 0.01) |
 //! | action | 8 hip and ankle torques in [-1, 1] |
-//! | observation | 105 = qpos[2:] (torso z, orientation quaternion, 8 joint angles: 13) + qvel (14) + clip(cfrc_ext[1:], -1, 1) (13 bodies x 6: 78) |
+//! | observation | 105 = `qpos[2:]` (torso z, orientation quaternion, 8 joint angles: 13) + qvel (14) + clip(`cfrc_ext[1:]`, -1, 1) (13 bodies x 6: 78) |
 //! | reward | forward = dx/dt of the torso body (`xpos`); survive = 1 while healthy; ctrl = -0.5 * ‖a‖²; contact = -5e-4 * ‖clip(cfrc_ext, -1, 1)‖² |
 //! | termination | unhealthy: any qpos or qvel not finite, or torso z ∉ [0.2, 1.0] |
 //! | reset | qpos0 + U(-0.1, 0.1), qvel0 + 0.1 * N(0, 1) |

@@ -4,7 +4,7 @@
 //! |---|---|
 //! | model | `half_cheetah.xml` (timestep 0.01) |
 //! | action | 6 joint torques in [-1, 1] (bthigh, bshin, bfoot, fthigh, fshin, ffoot) |
-//! | observation | 17 = qpos[1:] (rootz, rooty, 6 joint angles) + qvel (9), unclipped |
+//! | observation | 17 = `qpos[1:]` (rootz, rooty, 6 joint angles) + qvel (9), unclipped |
 //! | reward | forward = dx/dt; ctrl = -0.1 * ‖a‖²; no survival term |
 //! | termination | never; truncation after 1000 steps |
 //! | reset | qpos0 + U(-0.1, 0.1), qvel0 + 0.1 * N(0, 1) |

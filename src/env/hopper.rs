@@ -4,9 +4,9 @@
 //! |---|---|
 //! | model | `hopper.xml` (timestep 0.002) |
 //! | action | 3 joint torques in [-1, 1] (thigh, leg, foot) |
-//! | observation | 11 = qpos[1:] (rootz, rooty, 3 joint angles) + clip(qvel, -10, 10) (6) |
+//! | observation | 11 = `qpos[1:]` (rootz, rooty, 3 joint angles) + clip(qvel, -10, 10) (6) |
 //! | reward | forward = dx/dt; survive = 1 while healthy; ctrl = -1e-3 * ‖a‖² |
-//! | termination | unhealthy: z ∉ (0.7, ∞), angle ∉ (-0.2, 0.2), or any of state_vector()[2:] ∉ (-100, 100) |
+//! | termination | unhealthy: z ∉ (0.7, ∞), angle ∉ (-0.2, 0.2), or any of `state_vector()[2:]` ∉ (-100, 100) |
 //! | reset | qpos0 + U(-5e-3, 5e-3), qvel0 + U(-5e-3, 5e-3) |
 use super::{EnvSpec, Forward, Health, ResetNoise};
 

@@ -4,11 +4,11 @@
 /// variant pays `reward` per step while healthy (v5 pays nothing once unhealthy).
 #[derive(Debug, Clone, Copy)]
 pub enum Health {
-    /// The planar walkers (Hopper, Walker2d): open intervals for the torso height qpos[1],
-    /// the torso angle qpos[2] and, where the task checks it, every element of
-    /// state_vector()[2:].
+    /// The planar walkers (Hopper, Walker2d): open intervals for the torso height `qpos[1]`,
+    /// the torso angle `qpos[2]` and, where the task checks it, every element of
+    /// `state_vector()[2:]`.
     Planar { reward: f64, z_range: (f64, f64), angle_range: (f64, f64), state_range: Option<(f64, f64)> },
-    /// Ant: every qpos and qvel finite and the torso height qpos[2] in a closed interval.
+    /// Ant: every qpos and qvel finite and the torso height `qpos[2]` in a closed interval.
     Upright { reward: f64, z_range: (f64, f64) },
 }
 
@@ -23,7 +23,7 @@ impl Health {
 /// Where the forward velocity dx/dt is measured.
 #[derive(Debug, Clone, Copy)]
 pub enum Forward {
-    /// The root slide joint, qpos[0] (the planar robots).
+    /// The root slide joint, `qpos[0]` (the planar robots).
     Qpos0,
     /// The Cartesian position of a body (`data.xpos`, which `mj_step` leaves at the last
     /// substep's kinematics, as Gymnasium reads it): Ant's `main_body`.

@@ -4,7 +4,7 @@
 //! |---|---|
 //! | model | `walker2d_v5.xml` (v5's model: both feet have friction 0.9) |
 //! | action | 6 joint torques in [-1, 1] |
-//! | observation | 17 = qpos[1:] (8) + clip(qvel, -10, 10) (9) |
+//! | observation | 17 = `qpos[1:]` (8) + clip(qvel, -10, 10) (9) |
 //! | reward | forward = dx/dt; survive = 1 while healthy; ctrl = -1e-3 * ‖a‖² |
 //! | termination | unhealthy: z ∉ (0.8, 2.0) or angle ∉ (-1, 1) |
 //! | reset | qpos0 + U(-5e-3, 5e-3), qvel0 + U(-5e-3, 5e-3) |

@@ -1,7 +1,7 @@
 //! The kernels: every computation whose bits idrex fixes on any x86-64 processor, and all of
 //! the `unsafe` that makes them fast. The matrix products ([`gemm`] in f32, [`bf16`] with
 //! bf16 factors) and their x86 micro-kernels, the elementwise passes' AVX-512 builds
-//! ([`vectorised!`]), register transposes ([`transpose_rows`]), 64-byte-aligned buffers
+//! (`vectorised!`), register transposes ([`transpose_rows`]), 64-byte-aligned buffers
 //! ([`Buf`]) and the per-thread denormal flush ([`FlushDenormals`]). The networks in
 //! [`crate::nn`] and the learners in [`crate::algo`] call these; nothing here knows of a
 //! network.

@@ -183,11 +183,11 @@ pub fn parse(path: &Path, buf: &[u8]) -> Result<Rollouts> {
         return Err(Error::file(path, "is not an MCAP file (rollouts are the rollouts.mcap files of a store's artifacts)"));
     }
     // A file cut short has no valid footer; catch that before streaming.
-    mcap::read::footer(&buf).map_err(|e| corrupt(path, e))?;
-    let summary = mcap::read::Summary::read(&buf).map_err(|e| corrupt(path, e))?.ok_or_else(|| corrupt(path, "no summary section"))?;
+    mcap::read::footer(buf).map_err(|e| corrupt(path, e))?;
+    let summary = mcap::read::Summary::read(buf).map_err(|e| corrupt(path, e))?.ok_or_else(|| corrupt(path, "no summary section"))?;
     let mut meta = BTreeMap::new();
     for idx in &summary.metadata_indexes {
-        let m = mcap::read::metadata(&buf, idx).map_err(|e| corrupt(path, e))?;
+        let m = mcap::read::metadata(buf, idx).map_err(|e| corrupt(path, e))?;
         if m.name == "idrex.rollout" {
             meta = m.metadata;
         }

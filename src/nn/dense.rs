@@ -263,6 +263,7 @@ mod tests {
     /// The passes run their AVX-512 build on a CPU that has it: the bits must be those of
     /// the same operations one element at a time.
     #[test]
+    #[allow(clippy::needless_range_loop)] // the reference loop reads like the formula.
     fn vectorised_passes_give_the_scalar_bits() {
         let n = 16 * 37 + 5;
         let vals = |k: f32| (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect::<Vec<f32>>();

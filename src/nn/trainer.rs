@@ -37,7 +37,7 @@ vectorised! {
 }
 
 vectorised! {
-    /// [`adam_update`] on the gradient `g0 + g1` (two lanes' sums), plus `l2 * params` where
+    /// `adam_update` on the gradient `g0 + g1` (two lanes' sums), plus `l2 * params` where
     /// `weights`: the bits of summing into a buffer, adding the L2 term and updating, one
     /// pass instead of four.
     #[allow(clippy::too_many_arguments)]

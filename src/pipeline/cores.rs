@@ -30,7 +30,7 @@ pub fn grants(starting: &[&Node], free: usize) -> Vec<usize> {
 const WINDOW: Duration = Duration::from_millis(100);
 
 /// How many of the CPUs this process may run on are idle, not counting this process's own
-/// use of them, watched for [`WINDOW`]: the CPUs' busy time (`/proc/stat`) less this
+/// use of them, watched for `WINDOW`: the CPUs' busy time (`/proc/stat`) less this
 /// process's CPU time. None where `/proc` cannot tell (not Linux).
 pub fn idle_elsewhere() -> Option<usize> {
     let cpus = allowed_cpus()?;

@@ -1,4 +1,4 @@
-//! What a stage reads, declared per stage kind as a struct ([`stage_inputs!`]): the graph
+//! What a stage reads, declared per stage kind as a struct ([`crate::stage_inputs!`]): the graph
 //! fills it with node names, the runner resolves it to artifact directories, and a stage's
 //! body gets its own kind's struct. Roles ([`Role`]) appear only where inputs cross a
 //! boundary (keys, manifests, Slurm definitions): [`StageInputs::roles`] writes them in one
@@ -56,7 +56,7 @@ impl<T> Named<T> {
     }
 }
 
-/// A kind's input read once, perhaps, or as a series (the field types [`stage_inputs!`]
+/// A kind's input read once, perhaps, or as a series (the field types [`crate::stage_inputs!`]
 /// writes).
 pub type One<T> = T;
 pub type Maybe<T> = Option<T>;
@@ -74,6 +74,8 @@ macro_rules! stage_inputs {
         }
 
         impl<T> $crate::pipeline::inputs::StageInputs<T> for $name<T> {
+            // A kind's roles are pushed one macro arm each.
+            #[allow(clippy::vec_init_then_push)]
             fn roles(&self) -> Vec<($crate::pipeline::role::Role, &T)> {
                 #[allow(unused_mut)]
                 let mut out = Vec::new();

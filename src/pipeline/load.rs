@@ -336,7 +336,7 @@ impl Pipeline {
     /// This pipeline on one of its environments (with that environment's defaults).
     pub fn for_env(&self, env: EnvId) -> Pipeline {
         let ctrl_coeff = self.spec.reward.ctrl_coeff.unwrap_or(default_ctrl_coeff(env));
-        Pipeline { env, composition: Composition { ctrl_coeff, ..self.composition.clone() }, ..self.clone() }
+        Pipeline { env, composition: Composition { ctrl_coeff, ..self.composition }, ..self.clone() }
     }
 
     /// Whether the file is a study over several environments (node names then start with

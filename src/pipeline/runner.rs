@@ -74,6 +74,7 @@ pub fn run_one(
     s
 }
 
+#[allow(clippy::too_many_arguments)] // one stage run: the node, its key and inputs, and the run's shared context.
 fn run_node(
     node: &Node,
     key: &str,

@@ -128,9 +128,9 @@ mod tests {
         assert_eq!(c.improvement.unpaired, 7.0 / 9.0);
         assert!(c.improvement.unpaired_ci.0 <= 7.0 / 9.0 && 7.0 / 9.0 <= c.improvement.unpaired_ci.1);
         assert!(compare(&agg, "new", "missing").is_empty());
-        let md = comparison_markdown(&[c.clone()]);
+        let md = comparison_markdown(std::slice::from_ref(c));
         assert!(md.contains("| Hopper-v5 | final | drex | new | old | 3 | 6.3 | 3.3 | P 0.78 ["), "{md}");
-        assert_eq!(Table::of(&[c.clone()]).csv().lines().count(), 2);
+        assert_eq!(Table::of(std::slice::from_ref(c)).csv().lines().count(), 2);
         assert!(md.contains("2 of 3 [") && md.contains("⚠ only 3 replicates"), "{md}");
     }
 }

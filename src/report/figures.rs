@@ -9,9 +9,9 @@
 //!   one line per run, coloured by method;
 //! - `final`: the five methods under the three protocols, bars with 95 % bootstrap intervals,
 //!   with the demonstrations' average;
-//! - `clones`: multi-BC's clones against their sources ([`clones`]);
+//! - `clones`: multi-BC's clones against their sources (`figures/clones.rs`);
 //! - per (environment, study) with several replicates, `intervals` and `profile`
-//!   ([`studies`]).
+//!   (`figures/studies.rs`).
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -208,7 +208,7 @@ pub fn write(
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
-        let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(&m) else { continue };
+        let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         if g.demos.is_none()
             && let Some((_, Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. })) =

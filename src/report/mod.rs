@@ -138,7 +138,7 @@ fn collect(store: &Artifacts) -> Result<Long> {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
-        let (p, x) = match Typed::of(&m) {
+        let (p, x) = match Typed::of(m) {
             Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) => (p, x),
             Ok(_) => continue,
             Err(e) => {

@@ -22,7 +22,7 @@
 //! lookups, listings, verification and gc go to the bucket; a stage runs in a local cache
 //! directory laid out like a local store (inputs downloaded into it and checked, outputs
 //! published there first) and is then pushed, manifest last. The two differ only behind
-//! [`backend::Backend`]: the local directory and the bucket are its two implementations.
+//! `backend::Backend`: the local directory and the bucket are its two implementations.
 pub mod archive;
 mod backend;
 mod remote;

@@ -271,7 +271,7 @@ fn non_finite(cfg: &BcConfig) -> Error {
 
 /// Trains a deterministic policy on the (s_t, a_t) pairs of `trajs`: on the CPU on up to
 /// `workers` threads (the result does not depend on how many: see [`crate::nn::dense`]), or
-/// on the GPU ([`train_torch`]).
+/// on the GPU (`train_torch`).
 pub fn train(trajs: &[Trajectory], cfg: &BcConfig, seed: u64, workers: usize, device: Device) -> Result<(ActorCritic, BcReport)> {
     train_validated(trajs, None, cfg, seed, workers, device)
 }
@@ -322,7 +322,7 @@ impl<W> Stopper<W> {
 
     /// Whether iteration `it` (before its step) measures the validation loss.
     fn due(&self, it: usize) -> bool {
-        self.es.is_some_and(|es| it % es.every.max(1) == 0)
+        self.es.is_some_and(|es| it.is_multiple_of(es.every.max(1)))
     }
 
     /// Records the loss measured at `it`; true when `patience` measurements in a row brought

@@ -1,5 +1,5 @@
 //! PPO for continuous actions, read top to bottom like CleanRL's `ppo_continuous_action.py`:
-//! collect a rollout ([`collect`]), turn its rewards into scaled rewards, let the
+//! collect a rollout (`collect`), turn its rewards into scaled rewards, let the
 //! [`RolloutBuffer`] compute GAE (bootstrapping truncations where asked), run the
 //! [`update`], log. The
 //! implementation details that matter on MuJoCo: clipped surrogate and clipped value loss,
@@ -142,6 +142,7 @@ impl Default for PpoConfig {
 }
 
 /// What PPO maximises.
+#[allow(clippy::large_enum_variant)] // one per run, never moved in a loop.
 pub enum RewardSource {
     GroundTruth,
     Learned { model: RewardEnsemble, composition: Composition },
@@ -217,6 +218,7 @@ impl Normalisers {
 /// Trains a policy with PPO. `on_update` sees every update's statistics and returns false to
 /// stop early (the demonstrator stops at a target return); `checkpoint`, when given,
 /// receives the policy after the first update and every `cfg.checkpoint_every` updates.
+#[allow(clippy::needless_range_loop)] // k indexes the rewards, the buffer and the env slot together.
 pub fn train(
     id: EnvId,
     cfg: &PpoConfig,

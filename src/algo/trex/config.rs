@@ -42,7 +42,7 @@ pub struct TrexConfig {
     #[serde(skip_serializing_if = "RewardObservation::is_all")]
     pub observation: RewardObservation,
     /// `ranking` (T-REX's Bradley-Terry loss over pairs) or `regression` (SSRR's recipe
-    /// without AIRL, [`regression`]: a sigmoid of the ranking ensemble's reward per step
+    /// without AIRL, [`super::regression`]: a sigmoid of the ranking ensemble's reward per step
     /// against noise, then a fresh ensemble regressed on it; D-REX's reward only).
     #[serde(skip_serializing_if = "TrexLoss::is_ranking")]
     pub loss: TrexLoss,

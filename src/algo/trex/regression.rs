@@ -47,7 +47,7 @@ fn shape(slope: f64, mid: f64, noise: f64) -> f64 {
 /// closed form at each. Deterministic; None with fewer than two distinct noise levels.
 pub fn fit(noise: &[f64], value: &[f64]) -> Option<Curve> {
     let (lo, hi) = noise.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-    if noise.len() != value.len() || !(hi > lo) {
+    if noise.len() != value.len() || hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let n = noise.len() as f64;

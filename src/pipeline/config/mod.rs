@@ -192,7 +192,7 @@ impl Default for EvalConfig {
     }
 }
 
-/// How PPO's reward is composed from the learned ensemble ([`Composition`]). The defaults of
+/// How PPO's reward is composed from the learned ensemble ([`crate::nn::reward::Composition`]). The defaults of
 /// `level` and `ceiling` are the recommended reward (analysis/results/reward-level/, and
 /// analysis/results/walker2d-reward/ for Walker2d), not the original code's:
 /// `pipelines/*-original.yaml` spell the original's out.

@@ -21,9 +21,9 @@
 //! | trex | 3 | set0..setN, demos | reward/ | trex.rs |
 //! | ppo | 3 | reward, floor? | policy/, curve.csv | ppo.rs |
 //! | eval | 2 | policy, reward?, demos | rollouts.mcap | eval.rs |
-//! | interpolation-rollouts | 1 | policy<r>, older<r> | rollouts.mcap | idrex/interpolation.rs |
-//! | action-noise-rollouts | 1 | policy<r> | rollouts.mcap | idrex/action_noise.rs |
-//! | multi-bc-rollouts | 4 | policy<r>, baseline<i>, reward, judge?, demos, eval<r> | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
+//! | interpolation-rollouts | 1 | `policy<r>, older<r>` | rollouts.mcap | idrex/interpolation.rs |
+//! | action-noise-rollouts | 1 | `policy<r>` | rollouts.mcap | idrex/action_noise.rs |
+//! | multi-bc-rollouts | 4 | `policy<r>, baseline<i>, reward, judge?, demos, eval<r>` | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
 pub mod bc;
 pub mod demos;
 pub mod eval;
