@@ -323,6 +323,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         let manifests = store.unverified_manifests().unwrap_or_default();
         crate::pipeline::gaps::print(&g, &manifests, p.spec.eval.bc_warning);
         let est = crate::pipeline::schedule::Estimates::from_manifests(&manifests);
+        let est = if est.guesses(&g) { est.on(crate::pipeline::calibrate::Speed::measure()) } else { est };
         let cost = |n: &crate::pipeline::Node| if stored(&keys[&n.name]) { 0.0 } else { est.seconds(n) };
         let (path, cp) = crate::pipeline::schedule::critical_path(&g, &cost);
         let total: f64 = g.nodes.iter().map(cost).sum();
@@ -339,7 +340,7 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
             println!("critical path: {}", path.join(" -> "));
         }
         if !guessed.is_empty() {
-            println!("(no stored artifact of {}: their times are the reference machine's)", guessed.join(", "));
+            println!("(no stored artifact of {}: their times are the reference machine's, scaled to this processor)", guessed.join(", "));
         }
     }
     Ok(())

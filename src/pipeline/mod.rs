@@ -7,9 +7,10 @@
 //! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
 //! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG), [`sweep`]
 //! (a file's variants, their graphs joined),
-//! [`schedule`] and [`cores`] (ordering and threads), [`test_set`] (locked test sets),
+//! [`calibrate`], [`schedule`] and [`cores`] (this processor's speed, ordering and threads), [`test_set`] (locked test sets),
 //! [`gaps`] (BC far below its demonstrations), [`runner`], [`slurm`], [`recompute`] and
 //! [`plots`].
+pub mod calibrate;
 pub mod config;
 pub mod cores;
 pub mod gaps;

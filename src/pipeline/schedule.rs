@@ -52,6 +52,8 @@ fn reference_rate(kind: StageKind) -> f64 {
 #[derive(Debug, Clone, Default)]
 pub struct Estimates {
     measured: BTreeMap<StageKind, f64>,
+    /// This processor against the reference machine, for the kinds the store has not measured.
+    speed: super::calibrate::Speed,
 }
 
 impl Estimates {
@@ -76,13 +78,24 @@ impl Estimates {
                 (k, v[v.len() / 2])
             })
             .collect();
-        Estimates { measured }
+        Estimates { measured, speed: Default::default() }
+    }
+
+    /// These estimates with the reference machine's rates scaled to `speed`.
+    pub fn on(self, speed: super::calibrate::Speed) -> Self {
+        Estimates { speed, ..self }
+    }
+
+    /// Whether some kind of `g`'s nodes has no rate from the store (a probe of this machine
+    /// then makes the estimate).
+    pub fn guesses(&self, g: &Graph) -> bool {
+        g.nodes.iter().any(|n| !self.measured(n.kind()))
     }
 
     /// The estimated seconds `node` takes to compute.
     pub fn seconds(&self, node: &Node) -> f64 {
         let kind = node.kind();
-        self.measured.get(&kind).copied().unwrap_or_else(|| reference_rate(kind)) * work(&node.params)
+        self.measured.get(&kind).copied().unwrap_or_else(|| reference_rate(kind) * self.speed.factor(kind)) * work(&node.params)
     }
 
     /// Whether the store gave the rate of `kind` (else the reference machine's is used).
