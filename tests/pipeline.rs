@@ -749,24 +749,24 @@ print("ok")
     );
     let fresh = dir.join("store2");
     std::fs::create_dir_all(&fresh).unwrap();
-    // Replicate 3 of the study from the original demonstrations, beside generated ones.
-    let npz = repo("../shared/data/drex-demos/hopper.npz");
-    if npz.exists() {
-        let imported = file("e.yaml", "first_replicate: 3", "[0, 1]");
-        let text = std::fs::read_to_string(&imported).unwrap();
-        assert!(text.contains("demos:\n  episodes: 2\n"));
-        std::fs::write(&imported, text.replace("demos:\n  episodes: 2\n", &format!("demos:\n  from: {}\n", npz.display()))).unwrap();
-        for f in [file("d.yaml", "replicates: 2", "[0, 1]"), imported] {
-            let rec = dir.join("r.rrd");
-            let out =
-                idrex(&["pipeline", "run", f.to_str().unwrap(), "--store", fresh.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
-            assert!(out.status.success(), "{}", stderr(&out));
-        }
-        let rep = idrex(&["report", "--store", fresh.to_str().unwrap(), "--out", report.to_str().unwrap()]);
-        assert!(!rep.status.success() && stderr(&rep).contains("disagree on the demonstrations"), "{}", stderr(&rep));
-    } else {
-        crate::util::skip("pipeline::(the disagreeing-demonstrations case)", &format!("{} is not here", npz.display()));
+    // Replicate 3 of the study from imported demonstrations (an MCAP file another
+    // demonstrator of this test recorded), beside generated ones.
+    let store_ = idrex::store::Store::open(&store).unwrap();
+    let demos = store_.manifests().unwrap().into_iter().find(|m| m.kind == "demos").expect("a demos artifact");
+    let imported_demos = dir.join("imported-demos.mcap");
+    std::fs::copy(store_.dir(&demos.key).join("rollouts.mcap"), &imported_demos).unwrap();
+    let imported = file("e.yaml", "first_replicate: 3", "[0, 1]");
+    let text = std::fs::read_to_string(&imported).unwrap();
+    assert!(text.contains("demos:\n  episodes: 2\n"));
+    std::fs::write(&imported, text.replace("demos:\n  episodes: 2\n", &format!("demos:\n  from: {}\n", imported_demos.display()))).unwrap();
+    for f in [file("d.yaml", "replicates: 2", "[0, 1]"), imported] {
+        let rec = dir.join("r.rrd");
+        let out =
+            idrex(&["pipeline", "run", f.to_str().unwrap(), "--store", fresh.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
+        assert!(out.status.success(), "{}", stderr(&out));
     }
+    let rep = idrex(&["report", "--store", fresh.to_str().unwrap(), "--out", report.to_str().unwrap()]);
+    assert!(!rep.status.success() && stderr(&rep).contains("disagree on the demonstrations"), "{}", stderr(&rep));
 }
 
 /// Ant-v5 through every method at the smoke file's budgets: its own demonstrator, BC, D-REX

@@ -376,8 +376,13 @@ mod tests {
 
     fn paths() -> Vec<Bf16Path> {
         let mut paths: Vec<Bf16Path> = Kernel::ALL.into_iter().filter(|k| k.supported()).map(Bf16Path::Emulated).collect();
+        for k in Kernel::ALL.into_iter().filter(|k| !k.supported()) {
+            super::super::narrowed("kernels::bf16::tests (every path)", k.name());
+        }
         if Bf16Path::native_supported() {
             paths.push(Bf16Path::Native);
+        } else {
+            super::super::narrowed("kernels::bf16::tests (every path)", "AVX512-BF16");
         }
         paths
     }

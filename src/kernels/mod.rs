@@ -10,6 +10,21 @@ use std::ops::Range;
 pub mod bf16;
 pub mod gemm;
 
+/// Records that a test checked less than its name says because this processor lacks `what`:
+/// one line on stderr past the capture, and one in the skip ledger (`IDREX_SKIP_LEDGER`, which
+/// `./dev test` counts and `.ci/run` checks against the skips it declares).
+#[cfg(test)]
+pub(crate) fn narrowed(test: &str, what: &str) {
+    use std::io::Write;
+    let line = format!("test {test} ... SKIPPED (in part): this processor has no {what}\n");
+    let _ = std::io::stderr().lock().write_all(line.as_bytes());
+    if let Some(path) = std::env::var_os("IDREX_SKIP_LEDGER")
+        && let Ok(mut f) = std::fs::OpenOptions::new().create(true).append(true).open(path)
+    {
+        let _ = f.write_all(line.as_bytes());
+    }
+}
+
 /// Elementwise passes, each compiled twice, for AVX-512 (where the active [`gemm::Kernel`] is
 /// AVX-512) and for the baseline x86-64 the crate targets. Both give the same bits: the
 /// passes are independent per element or sum over rows in row order, and Rust neither
