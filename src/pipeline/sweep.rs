@@ -31,8 +31,8 @@ pub struct Sweep {
 }
 
 /// A mistake in a `-S` argument, named as the file's would be.
-fn arg_error(path: &Path, message: String) -> ConfigError {
-    ConfigError { file: path.into(), line: 0, column: 0, message, also: vec![], setting: Some("-S".into()) }
+fn arg_error(path: &Path, setting: String, message: String) -> ConfigError {
+    ConfigError { file: path.into(), line: 0, column: 0, message, also: vec![], setting: Some(setting) }
 }
 
 impl Sweep {
@@ -46,7 +46,10 @@ impl Sweep {
         let mut fixed = Vec::new();
         let mut axes: Vec<(String, Vec<(serde_json::Value, Source)>)> = Vec::new();
         for a in args {
-            let (field, values) = parse_arg(a).map_err(|e| arg_error(path, e))?;
+            let (field, values) = parse_arg(a).map_err(|e| {
+                let prefix = format!("-S {a}: ");
+                arg_error(path, format!("-S {a}"), e.strip_prefix(&prefix).unwrap_or(&e).to_string())
+            })?;
             match values.as_slice() {
                 [one] => fixed.push(Setting { path: field, value: one.clone(), source: Source::CommandLine }),
                 _ => axes.push((field, values.into_iter().map(|v| (v, Source::CommandLine)).collect())),
@@ -160,7 +163,9 @@ impl Sweep {
         }
         let mut seen = BTreeMap::new();
         if let Some(v) = variants.iter().find(|v| seen.insert(v.pipeline.name.clone(), ()).is_some()) {
-            return Err(arg_error(path, format!("two variants are both `{}`; list each value once", v.pipeline.name)));
+            let set: Vec<String> = args.iter().map(|a| format!("-S {a}")).collect();
+            let setting = if set.is_empty() { "sweep".to_string() } else { set.join(" ") };
+            return Err(arg_error(path, setting, format!("two variants are both `{}`; list each value once", v.pipeline.name)));
         }
         let file = if fixed.is_empty() { plain } else { variants[0].pipeline.clone() };
         Ok(Sweep { file, variants, baseline })
