@@ -228,8 +228,16 @@ mod tests {
     /// nothing (while the summed return, the old filter's score, depends on both).
     #[test]
     fn per_step_score_ignores_length_and_offset() {
-        let cfg =
-            RewardConfig { obs_dim: 2, obs_stride: None, act_dim: None, hidden: vec![8], models: 3, clip: 10.0, init: Default::default() };
+        let cfg = RewardConfig {
+            obs_dim: 2,
+            obs_stride: None,
+            obs_offset: None,
+            act_dim: None,
+            hidden: vec![8],
+            models: 3,
+            clip: 10.0,
+            init: Default::default(),
+        };
         let reward = crate::nn::seeded(3, || RewardEnsemble::new(cfg.clone()));
         let demos = vec![constant(50, 0.3), constant(30, -0.2)];
         let good = |x: f32| reward.raw(constant(1, x).next_obs(), &[0.0]).iter().map(|m| m[0] as f64).sum::<f64>();

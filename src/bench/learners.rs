@@ -122,6 +122,7 @@ fn reward_inference_rates() -> (f64, f64) {
     let config = RewardConfig {
         obs_dim: 17,
         obs_stride: None,
+        obs_offset: None,
         act_dim: None,
         hidden: vec![256, 256],
         models: 3,

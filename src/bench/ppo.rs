@@ -57,6 +57,7 @@ pub fn ppo_bench(args: &PpoBenchArgs) -> anyhow::Result<serde_json::Value> {
         let config = RewardConfig {
             obs_dim: env.obs_dim(),
             obs_stride: None,
+            obs_offset: None,
             act_dim: None,
             hidden: vec![256, 256],
             models: 3,

@@ -45,10 +45,10 @@ impl Trajectory {
     pub fn action_row(&self, t: usize) -> &[f32] {
         &self.actions[t * self.act_dim..(t + 1) * self.act_dim]
     }
-    /// The same trajectory seeing only the first `k` entries of each observation.
-    pub fn obs_prefix(&self, k: usize) -> Trajectory {
-        let obs = self.obs.chunks(self.obs_dim).flat_map(|row| &row[..k]).copied().collect();
-        Trajectory { obs_dim: k, obs, ..self.clone() }
+    /// The same trajectory seeing only the entries `seen` of each observation.
+    pub fn obs_part(&self, seen: std::ops::Range<usize>) -> Trajectory {
+        let obs = self.obs.chunks(self.obs_dim).flat_map(|row| &row[seen.clone()]).copied().collect();
+        Trajectory { obs_dim: seen.len(), obs, ..self.clone() }
     }
     /// s_1..s_T, the observations rewards are paid on.
     pub fn next_obs(&self) -> &[f32] {

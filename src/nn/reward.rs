@@ -24,12 +24,17 @@ pub type RewardNet = Mlp;
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RewardConfig {
-    /// Observation entries the networks read: the first `obs_dim` of each observation.
+    /// Observation entries the networks read: `obs_dim` of each observation, from
+    /// `obs_offset`.
     pub obs_dim: usize,
-    /// The observations' full length, where the networks read only their first `obs_dim`
-    /// entries (`trex.observation: without-contact-forces`); absent: they read all of it.
+    /// The observations' full length, where the networks read only part of each
+    /// (`trex.observation`); absent: they read all of it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub obs_stride: Option<usize>,
+    /// The first observation entry the networks read (`trex.observation: velocities`);
+    /// absent: the first.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub obs_offset: Option<usize>,
     /// Also feed the action, where set (the reference uses the observation only).
     pub act_dim: Option<usize>,
     pub hidden: Vec<usize>,
@@ -53,13 +58,14 @@ impl RewardConfig {
     /// The network's input rows for `obs` (rows of [`Self::stride`]) and, where the network
     /// reads them, `actions`; borrowed where they already are the rows.
     fn rows<'a>(&self, obs: &'a [f32], actions: &[f32]) -> (std::borrow::Cow<'a, [f32]>, usize) {
-        let (od, stride) = (self.obs_dim, self.stride());
+        let (od, stride, from) = (self.obs_dim, self.stride(), self.obs_offset.unwrap_or(0));
         let n = obs.len() / stride;
         if stride == od && self.act_dim.is_none() {
             return (obs.into(), n);
         }
         let a = self.act_dim.unwrap_or(0);
-        let x = (0..n).flat_map(|i| obs[i * stride..i * stride + od].iter().chain(&actions[i * a..(i + 1) * a]).copied()).collect();
+        let row = |i: usize| i * stride + from..i * stride + from + od;
+        let x = (0..n).flat_map(|i| obs[row(i)].iter().chain(&actions[i * a..(i + 1) * a]).copied()).collect();
         (std::borrow::Cow::Owned(x), n)
     }
 }
@@ -402,6 +408,7 @@ mod tests {
         RewardConfig {
             obs_dim: 1,
             obs_stride: None,
+            obs_offset: None,
             act_dim: None,
             hidden: vec![3],
             models: 2,
@@ -419,15 +426,16 @@ mod tests {
         ceiling: None,
     };
 
-    /// A reward that reads the first two of three observation entries scores whole rows as
-    /// the same networks score the rows cut to two, with or without actions, and keeps its
-    /// stride through a save and a load.
+    /// A reward that reads two of three observation entries (the leading two, or the last two
+    /// from an offset) scores whole rows as the same networks score the rows cut to those two,
+    /// with or without actions, and keeps its stride and offset through a save and a load.
     #[test]
-    fn reads_the_leading_entries_of_each_observation() {
-        for act_dim in [None, Some(1)] {
+    fn reads_its_part_of_each_observation() {
+        for (obs_offset, act_dim) in [(None, None), (None, Some(1)), (Some(1), None), (Some(1), Some(1))] {
             let config = RewardConfig {
                 obs_dim: 2,
                 obs_stride: Some(3),
+                obs_offset,
                 act_dim,
                 hidden: vec![4],
                 models: 2,
@@ -437,10 +445,12 @@ mod tests {
             let model = crate::nn::seeded(5, || RewardEnsemble::new(config.clone()));
             let obs = [0.1f32, -0.2, 9.0, 0.3, 0.4, -9.0];
             let actions = [0.5f32, -0.5];
-            // The rows the networks should read: the first two entries, then the action.
-            let rows: Vec<f32> = match act_dim {
-                None => vec![0.1, -0.2, 0.3, 0.4],
-                Some(_) => vec![0.1, -0.2, 0.5, 0.3, 0.4, -0.5],
+            // The rows the networks should read: the two entries, then the action.
+            let rows: Vec<f32> = match (obs_offset, act_dim) {
+                (None, None) => vec![0.1, -0.2, 0.3, 0.4],
+                (None, Some(_)) => vec![0.1, -0.2, 0.5, 0.3, 0.4, -0.5],
+                (Some(_), None) => vec![-0.2, 9.0, 0.4, -9.0],
+                (Some(_), Some(_)) => vec![-0.2, 9.0, 0.5, 0.4, -9.0, -0.5],
             };
             for (m, net) in model.nets.iter().enumerate() {
                 let mut out = Vec::new();
@@ -448,7 +458,8 @@ mod tests {
                 assert_eq!(model.raw(&obs, &actions)[m], out);
             }
             assert_eq!(model.raw(&obs, &actions)[0].len(), 2);
-            let dir = std::env::temp_dir().join(format!("idrex-stride-{}-{}", std::process::id(), act_dim.is_some()));
+            let tag = format!("{}-{:?}-{:?}", std::process::id(), obs_offset, act_dim);
+            let dir = std::env::temp_dir().join(format!("idrex-stride-{tag}"));
             model.save(&dir, serde_json::Value::Null).unwrap();
             let back = RewardEnsemble::load(&dir).unwrap();
             assert_eq!(back.config, config);
@@ -462,6 +473,7 @@ mod tests {
         let config = RewardConfig {
             obs_dim: 2,
             obs_stride: None,
+            obs_offset: None,
             act_dim: None,
             hidden: vec![4],
             models: 2,

@@ -36,9 +36,10 @@ pub struct TrexConfig {
     /// emulated elsewhere). Inference is f32 either way.
     #[serde(skip_serializing_if = "Precision::is_f32")]
     pub precision: Precision,
-    /// What of each observation the networks read: `all`, or `without-contact-forces`
-    /// (Ant's 78 contact-force entries left out; the other tasks observe none, and keep
-    /// `all` in their keys).
+    /// What of each observation the networks read: `all`, `without-contact-forces` (Ant's 78
+    /// contact-force entries left out; the other tasks observe none, and keep `all` in their
+    /// keys), or `velocities` (qvel only, the root's and the joints': no posture or height to
+    /// pay for).
     #[serde(skip_serializing_if = "RewardObservation::is_all")]
     pub observation: RewardObservation,
     /// `ranking` (T-REX's Bradley-Terry loss over pairs) or `regression` (SSRR's recipe
@@ -73,6 +74,9 @@ pub enum RewardObservation {
     /// The positions and velocities only: without the contact forces a task observes (Ant's
     /// 78), on which a reward can key standing still.
     WithoutContactForces,
+    /// The velocities only (qvel, as the task observes it): a reward that cannot see posture,
+    /// height or contacts can pay for motion, not for holding a pose.
+    Velocities,
 }
 
 impl RewardObservation {
@@ -80,15 +84,15 @@ impl RewardObservation {
         *self == RewardObservation::All
     }
 
-    /// How many leading observation entries the reward reads on `env` (`None`: all). Ant's
-    /// contact forces follow its positions and velocities.
-    pub fn seen(self, env: &crate::env::Env) -> Option<usize> {
+    /// The observation entries the reward reads on `env` (`None`: all of them). Every task
+    /// observes its positions, then its velocities, then (Ant) its contact forces.
+    pub fn seen(self, env: &crate::env::Env) -> Option<std::ops::Range<usize>> {
+        let positions = env.nq() - env.spec().obs_skip_qpos;
+        let state = positions + env.nv();
         match self {
             RewardObservation::All => None,
-            RewardObservation::WithoutContactForces => {
-                let state = env.nq() - env.spec().obs_skip_qpos + env.nv();
-                (state < env.obs_dim()).then_some(state)
-            }
+            RewardObservation::WithoutContactForces => (state < env.obs_dim()).then_some(0..state),
+            RewardObservation::Velocities => Some(positions..state),
         }
     }
 }
@@ -115,6 +119,29 @@ impl Default for TrexConfig {
             precision: Precision::F32,
             observation: RewardObservation::All,
             loss: TrexLoss::Ranking,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::RewardObservation::*;
+    use crate::env::{Env, EnvId};
+
+    /// The parts Gymnasium's observations hold: positions without the root's x (and Ant's
+    /// y), then qvel, then Ant's contact forces.
+    #[test]
+    fn each_option_reads_its_part_of_every_task() {
+        for (id, velocities, without_contacts) in [
+            (EnvId::HalfCheetah, 8..17, None),
+            (EnvId::Hopper, 5..11, None),
+            (EnvId::Walker2d, 8..17, None),
+            (EnvId::Ant, 13..27, Some(0..27)),
+        ] {
+            let env = Env::new(id).unwrap();
+            assert_eq!(All.seen(&env), None, "{id:?}");
+            assert_eq!(Velocities.seen(&env), Some(velocities), "{id:?}");
+            assert_eq!(WithoutContactForces.seen(&env), without_contacts, "{id:?}");
         }
     }
 }

@@ -224,6 +224,7 @@ pub fn train(
     let config = RewardConfig {
         obs_dim,
         obs_stride: None,
+        obs_offset: None,
         act_dim: cfg.action_input.then_some(trajs[0].act_dim),
         hidden: cfg.hidden.clone(),
         models: cfg.models,
@@ -490,6 +491,7 @@ mod tests {
         let config = RewardConfig {
             obs_dim: 3,
             obs_stride: None,
+            obs_offset: None,
             act_dim: None,
             hidden: cfg.hidden.clone(),
             models: 1,
@@ -550,6 +552,7 @@ mod tests {
             let config = RewardConfig {
                 obs_dim: 3,
                 obs_stride: None,
+                obs_offset: None,
                 act_dim: None,
                 hidden: cfg.hidden.clone(),
                 models: 2,

@@ -246,6 +246,7 @@ mod tests {
         let config = RewardConfig {
             obs_dim: 1,
             obs_stride: None,
+            obs_offset: None,
             act_dim: None,
             hidden: vec![16],
             models: 2,

@@ -96,9 +96,9 @@ impl Graph {
 /// A T-REX node's parameters for `m` on the given ranked sets.
 pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, cross_level: bool) -> Params {
     let mut cfg = p.trex_for(m);
-    // On a task without contact forces in its observation the option changes nothing: the key
-    // stays the one without it.
-    if p.env.spec().contact.is_none() {
+    // On a task without contact forces in its observation, leaving them out changes nothing:
+    // the key stays the one without the option.
+    if p.env.spec().contact.is_none() && cfg.observation == crate::algo::trex::RewardObservation::WithoutContactForces {
         cfg.observation = crate::algo::trex::RewardObservation::All;
     }
     Params::Trex(trex::TrexParams { env: p.env, trex: cfg, sets, cross_level, device: p.device })
@@ -385,21 +385,27 @@ mod tests {
         assert_eq!(floor(ppo_inputs("reward:\n  level: running\n  ceiling: none\n")), None);
     }
 
-    /// Training the rewards in bf16 changes every T-REX stage and what follows it (BC and the
-    /// rollouts it feeds are reused); `precision: f32` is the default and changes nothing.
+    /// Training the rewards in bf16, or on the velocities only, changes every T-REX stage and
+    /// what follows it (BC and the rollouts it feeds are reused); `precision: f32` is the
+    /// default and changes nothing.
     #[test]
-    fn reward_precision_changes_exactly_the_trex_stages_and_what_follows() {
+    fn reward_precision_and_inputs_change_exactly_the_trex_stages_and_what_follows() {
         let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
         let mut expected: Vec<String> =
             g.nodes.iter().filter(|n| n.kind() == StageKind::Trex).flat_map(|n| g.descendants(&n.name)).collect();
         expected.sort();
         expected.dedup();
         assert!(expected.iter().any(|n| n == "drex/trex") && expected.iter().any(|n| n.starts_with("drex/ppo/")));
-        let mut got = changed("trex:\n  precision: bf16\n");
-        got.sort();
-        assert_eq!(got, expected);
-        assert!(!got.iter().any(|n| n == "bc" || n == "drex/noise"), "{got:?}");
+        // What the reward reads changes the same stages; on Hopper, which observes no contact
+        // forces, leaving them out changes nothing.
+        for extra in ["trex:\n  precision: bf16\n", "trex:\n  observation: velocities\n"] {
+            let mut got = changed(extra);
+            got.sort();
+            assert_eq!(got, expected, "{extra}");
+            assert!(!got.iter().any(|n| n == "bc" || n == "drex/noise"), "{got:?}");
+        }
         assert!(changed("trex:\n  precision: f32\n").is_empty());
+        assert!(changed("trex:\n  observation: without-contact-forces\n").is_empty());
         // The manifest's CPU path names the bf16 path of a bf16 reward only.
         let p = Pipeline::parse(std::path::Path::new("p.yaml"), &format!("{BASE}trex:\n  precision: bf16\n")).unwrap();
         let g = expand(&p).unwrap();

@@ -101,9 +101,9 @@ pub fn run(p: &TrexParams, inputs: &TrexInputs<PathBuf>, ctx: &StageCtx) -> Resu
     }
     ctx.progress.set_message(format!("T-REX on {} trajectories", trajs.len()));
     let seen = p.trex.observation.seen(&Env::new(p.env)?);
-    let part: Vec<Trajectory> = match seen {
+    let part: Vec<Trajectory> = match &seen {
         None => Vec::new(),
-        Some(k) => trajs.iter().map(|t| t.obs_prefix(k)).collect(),
+        Some(range) => trajs.iter().map(|t| t.obs_part(range.clone())).collect(),
     };
     let learn_from = if seen.is_some() { &part } else { &trajs };
     let (mut model, reports) = trex::train(learn_from, &ranking, &p.trex, ctx.seed, ctx.threads, p.device)?;
@@ -124,8 +124,9 @@ pub fn run(p: &TrexParams, inputs: &TrexInputs<PathBuf>, ctx: &StageCtx) -> Resu
         model = regressed;
         fit = Some(RegressionFit { curve, members });
     }
-    // From here on the reward takes whole observations and reads their first `obs_dim`.
-    model.config.obs_stride = seen.map(|_| trajs[0].obs_dim);
+    // From here on the reward takes whole observations and reads the part it learned from.
+    model.config.obs_stride = seen.as_ref().map(|_| trajs[0].obs_dim);
+    model.config.obs_offset = seen.and_then(|range| (range.start > 0).then_some(range.start));
     model.save(&ctx.out.join(REWARD), serde_json::json!({"trex": p.trex}))?;
     let score = |ts: &[Trajectory]| Scored {
         predicted: ts.iter().map(|t| model.predicted_return(t.next_obs(), &t.actions)).collect(),
