@@ -152,6 +152,15 @@ pub(super) fn rl_runs(g: &mut Graph, p: &Pipeline, m: Method, prefix: &str, iter
 /// (`Hopper-v5/drex/ppo/0`); a replicated file, the union of its replicates' graphs, named
 /// `r<i>/` within each environment (`Hopper-v5/r3/drex/ppo/0`).
 pub fn expand(p: &Pipeline) -> crate::Result<Graph> {
+    expand_all(p).map_err(|e| match e {
+        crate::Error::File { ref path, .. } if path == &p.file => e,
+        // What the file asked for failed (a demonstrations file that cannot be read): the
+        // refusal names the pipeline file too.
+        other => crate::Error::file(&p.file, other.to_string()),
+    })
+}
+
+fn expand_all(p: &Pipeline) -> crate::Result<Graph> {
     if !p.is_study() && !p.is_replicated() {
         return expand_one(p);
     }

@@ -255,6 +255,13 @@ pub struct Typed {
 }
 
 impl Typed {
+    /// A manifest file's text read into its stage's types; every refusal names `path`.
+    pub fn parse(path: &Path, text: &str) -> Result<(crate::store::Manifest, Typed)> {
+        let m: crate::store::Manifest = serde_json::from_str(text).map_err(|e| Error::file(path, e.to_string()))?;
+        let typed = Typed::of(&m).map_err(|e| Error::file(path, e.to_string()))?;
+        Ok((m, typed))
+    }
+
     pub fn of(m: &crate::store::Manifest) -> Result<Typed> {
         let kind =
             StageKind::parse(&m.kind).ok_or_else(|| Error::Invalid(format!("artifact {}: unknown stage kind '{}'", m.key, m.kind)))?;

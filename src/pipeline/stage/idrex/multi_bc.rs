@@ -72,8 +72,7 @@ pub fn chosen_step(evals: &[impl AsRef<Path>]) -> Result<usize> {
     for dir in evals {
         let path = dir.as_ref().join(crate::store::MANIFEST);
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let m: crate::store::Manifest = serde_json::from_str(&text).map_err(|e| Error::file(&path, e.to_string()))?;
-        match Typed::of(&m)?.metrics {
+        match Typed::parse(&path, &text)?.1.metrics {
             AnyMetrics::Eval(e) => runs.push(e.checkpoints),
             _ => return Err(Error::file(&path, "the clone's source input is not an evaluation")),
         }
