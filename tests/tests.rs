@@ -3,6 +3,7 @@ mod util;
 
 mod bench;
 mod bootstrap;
+mod clone_filter;
 mod defaults;
 mod docs;
 mod env_cli;
