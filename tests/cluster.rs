@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use idrex::store::{Location, Store};
+use idrex::store::{Location, Store, TestSetMark};
 
 #[path = "s3_proxy.rs"]
 mod s3_proxy;
@@ -105,6 +105,19 @@ fn wait_settled(dir: &Path, file: &str, store: &str, limit: Duration) -> String 
         }
         assert!(start.elapsed() < limit, "jobs still queued or running after {limit:?}:\n{out}");
         std::thread::sleep(Duration::from_millis(500));
+    }
+}
+
+/// What a Slurm job's stage process is called on its command line.
+const STAGE_PROCESS: &str = concat!(env!("CARGO_BIN_EXE_idrex"), " stage run ");
+
+/// Waits until a job's stage process is running (seen by `pgrep`), so that a kill lands
+/// mid-way through a stage.
+fn wait_for_stage_process(limit: Duration) {
+    let start = Instant::now();
+    while !Command::new("pgrep").args(["-f", STAGE_PROCESS]).output().unwrap().status.success() {
+        assert!(start.elapsed() < limit, "no stage process appeared");
+        std::thread::sleep(Duration::from_millis(100));
     }
 }
 
@@ -256,7 +269,8 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
         assert!(start.elapsed() < limit, "the demonstrator job never ran");
         std::thread::sleep(Duration::from_millis(200));
     }
-    std::thread::sleep(Duration::from_secs(1));
+    // Mid-way: once the job's stage process is seen running, not after a clock.
+    wait_for_stage_process(limit);
     assert!(Command::new("scancel").arg(&first).status().unwrap().success());
     let status = wait_settled(&base, slow, &s3("c"), limit);
     assert!(status.lines().last().unwrap().ends_with("28 failed"), "{status}");
@@ -277,9 +291,8 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
         assert!(start.elapsed() < limit, "the demonstrator job never ran");
         std::thread::sleep(Duration::from_millis(200));
     }
-    std::thread::sleep(Duration::from_secs(1));
-    let pattern = format!("{} stage run ", env!("CARGO_BIN_EXE_idrex"));
-    assert!(Command::new("pkill").args(["-KILL", "-f", &pattern]).status().unwrap().success(), "no stage process to kill");
+    wait_for_stage_process(limit);
+    assert!(Command::new("pkill").args(["-KILL", "-f", STAGE_PROCESS]).status().unwrap().success(), "no stage process to kill");
     let status = wait_settled(&base, slow, &s3("e"), limit);
     assert!(status.lines().last().unwrap().ends_with("28 failed"), "{status}");
     let out = ok(idrex(&base, &["pipeline", "run", slow, "--store", &s3("e"), "--executor", "slurm", "--log-dir", "logs-e"]));
@@ -288,6 +301,29 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
     assert!(status.lines().last().unwrap().ends_with("28 stored"), "{status}");
     assert!(ok(idrex(&base, &["verify", "--store", &s3("e")])).contains("28 artifacts, 0 corrupt"));
     println!("slurm faults: a cancelled job (c) and a killed job (e) each failed their dependents, and a resubmission completed 28 of 28");
+
+    // 4d. A locked test set (`role: test`) as Slurm jobs: each evaluation's job writes the test
+    // set's mark into its manifest, as a local run does, and its seeds are then locked.
+    let smoke_bc = std::fs::read_to_string(repo("pipelines/smoke.yaml"))
+        .unwrap()
+        .replace("methods: [bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc]\n", "methods: [bc]\n");
+    assert!(smoke_bc.contains("methods: [bc]\n"), "the smoke pipeline's methods changed");
+    let (locked, other) = (base.join("locked.yaml"), base.join("other.yaml"));
+    std::fs::write(&locked, format!("{smoke_bc}name: locked\nrole: test\n")).unwrap();
+    // Another configuration: a BC trained for fewer iterations.
+    let other_bc = smoke_bc.replacen("bc:\n  hidden: [64, 64]\n  iterations: 300\n", "bc:\n  hidden: [64, 64]\n  iterations: 200\n", 1);
+    assert_ne!(other_bc, smoke_bc, "the smoke pipeline's BC changed");
+    std::fs::write(&other, format!("{other_bc}name: other\n")).unwrap();
+    let (locked, other) = (locked.to_str().unwrap(), other.to_str().unwrap());
+    let out = ok(idrex(&base, &["pipeline", "run", locked, "--store", &s3("t"), "--executor", "slurm", "--log-dir", "logs-t"]));
+    assert_eq!(submitted(&out).len(), 4, "{out}");
+    let status = wait_settled(&base, locked, &s3("t"), limit);
+    assert!(status.lines().last().unwrap().ends_with("4 stored"), "{status}");
+    let marks: Vec<_> = s3_store("t").manifests().unwrap().into_iter().filter(|m| m.kind == "eval").map(|m| m.test_set).collect();
+    assert_eq!(marks, [Some(TestSetMark::Test { study: "locked".into() })]);
+    let refused = idrex(&base, &["pipeline", "run", other, "--store", &s3("t"), "--executor", "slurm", "--log-dir", "logs-t"]);
+    assert!(!refused.status.success() && text(&refused).contains("belongs to the locked test set `locked`"), "{}", text(&refused));
+    println!("slurm test set: a role: test file's evaluation job wrote the mark; another configuration on its seeds was refused");
 
     // 4c. A replicated study (replicates: 3) as Slurm jobs into the bucket, with each new
     // replicate's first node submitted twice more by hand while its pipeline job waits or
@@ -412,6 +448,7 @@ fn pipelines_run_as_slurm_jobs_against_an_s3_store() -> bool {
 
     s3_load(&base, smoke, &reference);
     s3_faults(&base, smoke, &reference);
+    s3_refusals(&base);
     s3_server_killed(&base, &svc, smoke, &reference);
     s3_outage_outlasts_the_retries(&base, &svc, smoke, &reference);
 
@@ -467,6 +504,68 @@ fn s3_faults(base: &Path, smoke: &str, reference: &Digests) {
         started.elapsed().as_secs_f64()
     );
     assert!(run_retries + verify_retries + report_retries > 0);
+}
+
+/// S3's refusals, reached on purpose: an upload of a key another run published first with
+/// other bytes leaves theirs standing and sets ours aside (quarantined in the cache, never
+/// read), and a manifest whose output path climbs out of the cache is refused, writing
+/// nothing outside it.
+fn s3_refusals(base: &Path) {
+    let remote = idrex::store::s3::Remote::connect(BUCKET, "q").unwrap();
+    let key_of = |seed: u64| idrex::store::key("refusal", 1, &serde_json::json!({}), seed, &BTreeMap::new());
+    let key = key_of(0);
+    let manifest = |key: &str| idrex::store::Manifest {
+        key: key.to_string(),
+        kind: "refusal".into(),
+        version: 1,
+        node: "refusal".into(),
+        params: serde_json::json!({}),
+        seed: 0,
+        inputs: BTreeMap::new(),
+        outputs: Vec::new(),
+        metrics: serde_json::json!({}),
+        started_unix: 0.0,
+        ended_unix: 0.0,
+        wall_s: 0.0,
+        idrex_version: "test".into(),
+        kernel: None,
+        test_set: None,
+    };
+    let publish = |store: &Store, bytes: &str| {
+        let _lock = store.lock(&key).unwrap();
+        let staging = store.stage(&key).unwrap();
+        std::fs::write(staging.dir.join("out.txt"), bytes).unwrap();
+        store.publish(staging, manifest(&key), false).unwrap()
+    };
+    // Theirs: published by another machine first.
+    let elsewhere = Store::open(base.join("elsewhere")).unwrap();
+    let theirs = publish(&elsewhere, "theirs");
+    assert_eq!(remote.push(&elsewhere.dir(&key), &theirs, false).unwrap(), idrex::store::s3::Created::Yes);
+    // Ours: the same key with other bytes, through the S3 store.
+    let ours = s3_store("q");
+    publish(&ours, "ours");
+    assert!(!ours.dir(&key).exists(), "our copy is set aside");
+    let aside = std::fs::read_dir(ours.root().join(".corrupt"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&key))
+        .count();
+    assert_eq!(aside, 1, "our copy is quarantined");
+    assert_eq!(remote.manifest(&key).unwrap().unwrap().outputs, theirs.outputs, "theirs stands");
+    assert_eq!(std::fs::read_to_string(ours.input_dir(&key).unwrap().join("out.txt")).unwrap(), "theirs");
+
+    // A manifest whose output path climbs out of the cache, naming a blob that exists.
+    let escape = key_of(1);
+    let mut m = manifest(&escape);
+    m.outputs = theirs.outputs.clone();
+    m.outputs[0].path = "../../escaped.txt".into();
+    remote.put(&format!("artifacts/{escape}/manifest.json"), serde_json::to_vec(&m).unwrap()).unwrap();
+    let err = ours.input_dir(&escape).unwrap_err().to_string();
+    assert!(err.contains("'../../escaped.txt' is not a plain relative path"), "{err}");
+    let outside = ours.dir(&escape).join("../../escaped.txt");
+    assert!(!outside.exists() && !ours.root().join("escaped.txt").exists(), "nothing written outside the cache");
+    assert!(ours.lookup(&escape).unwrap().is_none(), "a run recomputes it");
+    println!("s3 refusals: same key with other bytes kept theirs and quarantined ours; a manifest's path escape was refused");
 }
 
 /// The S3 server killed (kill -9) while a run publishes, and restarted 3 s later. The run

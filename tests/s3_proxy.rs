@@ -5,12 +5,17 @@
 //! Faults: the connection is dropped before the request is read; the server answers
 //! 503 SlowDown (as S3 does under load); the request stalls past the client's timeout; the
 //! upload is cut off part-way; the answer is cut off part-way. Each is counted when it
-//! happened (a cut that falls past the end of a short message is not a fault).
+//! happened.
+//!
+//! Which request is faulted, and how, is a function of the seed and the request's position in
+//! arrival order only (a plan drawn when the proxy starts), never of a generator shared by
+//! requests as they come: the first five faults of the plan are the five kinds in a seeded
+//! order, so every kind is drawn in every run that makes a few dozen requests.
 #![allow(dead_code)]
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -26,17 +31,17 @@ pub const FAULTS: [Fault; 5] = [Fault::Drop, Fault::SlowDown, Fault::Stall, Faul
 
 struct State {
     upstream: u16,
-    /// Fraction of requests faulted.
-    rate: f64,
     stall: Duration,
-    /// Stalls left (each costs a client timeout).
-    stalls_left: AtomicU64,
-    rng: Mutex<u64>,
+    /// The fault of each request position (past its end, none).
+    plan: Vec<Option<Fault>>,
+    seed: u64,
+    /// Positions handed out, in arrival order.
+    arrivals: AtomicU64,
     requests: AtomicU64,
     injected: [AtomicU64; 5],
-    /// A cut upload was drawn for a request with no body: the next upload takes it. Which
-    /// request draws which fault depends on timing (two jobs share the proxy), so without this
-    /// a run could draw its cuts only on GETs and inject none.
+    /// A cut upload was planned for a request with no body: the next upload takes it. Which
+    /// request arrives at which position depends on timing (two jobs share the proxy), so
+    /// without this a run could plan its cuts only on GETs and inject none.
     cut_pending: AtomicBool,
     stop: AtomicBool,
 }
@@ -54,10 +59,10 @@ impl Proxy {
         let port = listener.local_addr().unwrap().port();
         let state = Arc::new(State {
             upstream,
-            rate,
             stall,
-            stalls_left: AtomicU64::new(stalls),
-            rng: Mutex::new(seed | 1),
+            plan: plan(seed, rate, stalls, PLANNED),
+            seed,
+            arrivals: AtomicU64::new(0),
             requests: AtomicU64::new(0),
             injected: Default::default(),
             cut_pending: AtomicBool::new(false),
@@ -98,29 +103,54 @@ impl Drop for Proxy {
     }
 }
 
+/// Requests planned for; later ones pass unfaulted (a run makes a few thousand).
+const PLANNED: usize = 1 << 20;
+
+/// splitmix64 of `x`: the proxy's only source of randomness, a pure function.
+fn mix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// A uniform draw in [0, 1) for (seed, position, purpose).
+fn uniform(seed: u64, position: u64, purpose: u64) -> f64 {
+    (mix(mix(seed ^ purpose.wrapping_mul(0xd6e8_feb8_6659_fd93)) ^ position) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// The fault of each of the first `n` positions: `rate` of them faulted; the first five
+/// faults are the five kinds in a seeded order, the rest drawn; past `stalls` stalls, a stall
+/// is a 503 instead.
+fn plan(seed: u64, rate: f64, stalls: u64, n: usize) -> Vec<Option<Fault>> {
+    let mut first = FAULTS;
+    for i in (1..first.len()).rev() {
+        first.swap(i, (mix(seed ^ i as u64) % (i as u64 + 1)) as usize);
+    }
+    let (mut faults, mut stalled) = (0usize, 0u64);
+    (0..n as u64)
+        .map(|pos| {
+            if uniform(seed, pos, 0) >= rate {
+                return None;
+            }
+            let f = first.get(faults).copied().unwrap_or(FAULTS[(uniform(seed, pos, 1) * FAULTS.len() as f64) as usize]);
+            faults += 1;
+            if f == Fault::Stall {
+                stalled += 1;
+                if stalled > stalls {
+                    return Some(Fault::SlowDown);
+                }
+            }
+            Some(f)
+        })
+        .collect()
+}
+
 impl State {
-    fn next(&self) -> u64 {
-        let mut x = self.rng.lock().unwrap();
-        // xorshift64*
-        *x ^= *x >> 12;
-        *x ^= *x << 25;
-        *x ^= *x >> 27;
-        x.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn uniform(&self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn choose(&self) -> Option<Fault> {
-        if self.uniform() >= self.rate {
-            return None;
-        }
-        let f = FAULTS[(self.next() % FAULTS.len() as u64) as usize];
-        if f == Fault::Stall && self.stalls_left.fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| n.checked_sub(1)).is_err() {
-            return Some(Fault::SlowDown);
-        }
-        Some(f)
+    /// This request's position and planned fault.
+    fn arrive(&self) -> (u64, Option<Fault>) {
+        let pos = self.arrivals.fetch_add(1, Ordering::Relaxed);
+        (pos, self.plan.get(pos as usize).copied().flatten())
     }
 
     fn count(&self, f: Fault) {
@@ -154,7 +184,7 @@ fn closing(head: &[u8]) -> Vec<u8> {
 }
 
 fn serve(s: &State, mut conn: TcpStream) {
-    let fault = s.choose();
+    let (pos, fault) = s.arrive();
     if fault == Some(Fault::Drop) {
         s.requests.fetch_add(1, Ordering::Relaxed);
         s.count(Fault::Drop);
@@ -202,10 +232,11 @@ fn serve(s: &State, mut conn: TcpStream) {
         (f, _) => f,
     };
     let cut_upload = match (fault, body) {
-        (Some(Fault::CutUpload), Some(len)) => Some(s.next() % len.min(4096)),
+        (Some(Fault::CutUpload), Some(len)) => Some((uniform(s.seed, pos, 2) * len.min(4096) as f64) as u64),
         _ => None,
     };
-    let cut_answer = (fault == Some(Fault::CutAnswer)).then(|| 1 + s.next() % 1024);
+    // Within the status line and headers, which every answer has: a cut always happens.
+    let cut_answer = (fault == Some(Fault::CutAnswer)).then(|| 1 + (uniform(s.seed, pos, 3) * 63.0) as u64);
     let (mut c2, mut u2) = (conn.try_clone().unwrap(), up.try_clone().unwrap());
     let upload = std::thread::spawn(move || pipe(&rest, &mut c2, &mut u2, cut_upload));
     let answered = pipe(&[], &mut up, &mut conn, cut_answer);
@@ -261,5 +292,29 @@ fn pipe(first: &[u8], from: &mut TcpStream, to: &mut TcpStream, cut: Option<u64>
             }
             Ok(n) => data = chunk[..n].to_vec(),
         }
+    }
+}
+
+/// Run in the suite's binary (`tests`); the cluster binary, which has no test harness, also
+/// includes this file.
+#[cfg(test)]
+mod tests {
+    #[allow(unused_imports)]
+    use super::*;
+
+    /// The plan is the seed's alone, draws every kind among its first faults, keeps the rate
+    /// and the stall budget, and differs between seeds.
+    #[test]
+    fn the_plan_is_a_function_of_the_seed_and_holds_every_kind() {
+        let a = plan(7, 0.2, 4, 20_000);
+        assert_eq!(a, plan(7, 0.2, 4, 20_000));
+        assert_ne!(a, plan(8, 0.2, 4, 20_000));
+        let faulted: Vec<Fault> = a.iter().flatten().copied().collect();
+        let share = faulted.len() as f64 / a.len() as f64;
+        assert!((0.18..0.22).contains(&share), "{share}");
+        for f in FAULTS {
+            assert!(faulted[..5].contains(&f), "{f:?} is not among the first five faults");
+        }
+        assert_eq!(faulted.iter().filter(|f| **f == Fault::Stall).count(), 4);
     }
 }

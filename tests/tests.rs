@@ -16,5 +16,6 @@ mod recording;
 mod reliability;
 mod report_html;
 mod rliable;
+mod s3_proxy;
 mod skips;
 mod sweep;

@@ -236,7 +236,13 @@ fn status(args: &StatusArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Graph) -> anyhow::Result<()> {
+fn submit(
+    args: &RunArgs,
+    p: &Pipeline,
+    store: &Store,
+    g: &crate::pipeline::Graph,
+    test_set: Option<&crate::store::TestSetMark>,
+) -> anyhow::Result<()> {
     if !args.force.is_empty() {
         bail!("--force is not supported with --executor slurm; recompute locally, or remove the artifact with `idrex gc`");
     }
@@ -248,7 +254,7 @@ fn submit(args: &RunArgs, p: &Pipeline, store: &Store, g: &crate::pipeline::Grap
         binary,
     };
     store.index()?;
-    let out = slurm::submit(g, store, &p.spec.slurm, &opts)?;
+    let out = slurm::submit(g, store, &p.spec.slurm, &opts, test_set)?;
     let mut jobs = Vec::new();
     for (node, key, s) in &out {
         match s {
@@ -368,13 +374,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     };
     let test_set = crate::pipeline::test_set::check(p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
-        if test_set.is_some() {
-            bail!(
-                "{}: a test set's evaluations are marked in their manifests, which Slurm jobs do not write yet; run it locally",
-                args.file.display()
-            );
-        }
-        return submit(args, p, &store, &g);
+        return submit(args, p, &store, &g, test_set.as_ref());
     }
     // Before any stage runs: a pipeline planned for CUDA on a machine without it.
     p.device.ensure_available().map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))?;

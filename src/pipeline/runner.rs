@@ -62,14 +62,14 @@ pub fn run_one(
     key: &str,
     inputs: BTreeMap<String, String>,
     store: &Store,
-    threads: usize,
+    (threads, test_set): (usize, Option<&TestSetMark>),
     progress: bool,
     body: &StageBody,
 ) -> Status {
     let bar = if progress { ProgressBar::new(0) } else { ProgressBar::hidden() };
     bar.set_style(working_style());
     bar.set_prefix(node.name.clone());
-    let s = run_node(node, key, inputs, store, (false, None), threads, &bar, body);
+    let s = run_node(node, key, inputs, store, (false, test_set), threads, &bar, body);
     bar.finish_and_clear();
     s
 }

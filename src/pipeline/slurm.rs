@@ -270,7 +270,15 @@ pub fn job_resources(n: &super::Node, resources: &SlurmConfig) -> super::config:
 
 /// Submits every node of `graph` the store lacks and nobody has queued; returns what
 /// happened to each node, in the graph's order. Nothing waits for the jobs.
-pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &SlurmOptions) -> Result<Vec<(String, String, Submission)>> {
+/// Submits every node `store` lacks; each evaluation's job writes `test_set` (a locked test
+/// set's mark) into its manifest, as a local run does.
+pub fn submit(
+    graph: &Graph,
+    store: &Store,
+    resources: &SlurmConfig,
+    opts: &SlurmOptions,
+    test_set: Option<&crate::store::TestSetMark>,
+) -> Result<Vec<(String, String, Submission)>> {
     std::fs::create_dir_all(&opts.log_dir).map_err(|e| Error::io(&opts.log_dir, e))?;
     let log_dir = std::path::absolute(&opts.log_dir).map_err(|e| Error::io(&opts.log_dir, e))?;
     let queue = Queue::read()?;
@@ -302,6 +310,7 @@ pub fn submit(graph: &Graph, store: &Store, resources: &SlurmConfig, opts: &Slur
                     params: n.params.to_json(),
                     seed: n.seed,
                     inputs,
+                    test_set: test_set.filter(|_| n.kind() == crate::pipeline::stage::StageKind::Eval).cloned(),
                 })?;
                 let deps: Vec<&str> = n.inputs.iter().filter_map(|(_, src)| done.get(src).and_then(Submission::job)).collect();
                 let log = log_dir.join(format!("{}-{}-%j.out", n.name.replace('/', "."), &key[..12]));

@@ -16,6 +16,10 @@ pub struct NodeDef {
     pub params: serde_json::Value,
     pub seed: u64,
     pub inputs: BTreeMap<String, String>,
+    /// The locked test set's mark the job writes into its manifest (evaluations of a `role:
+    /// test` file, or run with `--reuse-test-set`); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_set: Option<super::TestSetMark>,
 }
 
 impl Store {

@@ -385,6 +385,7 @@ mod tests {
             params: serde_json::json!({"a": 1}),
             seed: 3,
             inputs: [("demos".to_string(), "d".to_string())].into(),
+            test_set: Some(TestSetMark::Test { study: "locked".into() }),
         };
         assert_eq!(store.get_def("k").unwrap(), None);
         store.put_def(&def).unwrap();
