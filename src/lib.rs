@@ -8,6 +8,13 @@
 //!                                   ^                                  │
 //!                                   └──────── iD-REX iterations ───────┘
 //! ```
+//!
+//! Unsafe code is denied except where it is named: the SIMD kernels (`kernels`, the whole
+//! module, and the passes its `vectorised!` macro compiles twice), the vectorised environments' worker pool (`env::vec_env`), MuJoCo's actuator
+//! ranges (`env::Env::with_model`) and logging hook (`cli::init_tracing`), the atomic
+//! directory exchange (`store::exchange`) and loading libtorch's CUDA backend
+//! (`nn::device`).
+#![deny(unsafe_code)]
 pub mod algo;
 pub mod bench;
 pub mod cli;
@@ -15,6 +22,7 @@ pub mod data;
 pub mod env;
 pub mod error;
 pub mod exp;
+#[allow(unsafe_code)] // intrinsics behind runtime feature checks, and aligned buffers
 pub mod kernels;
 pub mod log;
 pub mod nn;

@@ -126,6 +126,7 @@ pub enum BenchCommand {
     Exp(crate::bench::exp::ExpBenchArgs),
 }
 
+#[allow(unsafe_code)] // MuJoCo's logging hook
 pub fn init_tracing(verbose: u8) {
     let default = match verbose {
         0 => "warn",

@@ -167,6 +167,7 @@ impl Env {
     }
 
     /// Builds an environment on an already loaded model (vectorised envs share one).
+    #[allow(unsafe_code)] // the model's actuator ranges, a raw array
     pub fn with_model(id: EnvId, model: Arc<MjModel>) -> Self {
         let spec = id.spec();
         let (nu, timestep, nbody) = (model.ffi().nu as usize, model.ffi().opt.timestep, model.ffi().nbody as usize);

@@ -202,6 +202,7 @@ struct WorkerShared {
 // SAFETY: a Job's pointers are only dereferenced by the worker between `generation` being
 // bumped and `done` being set, while the caller is blocked in `SpinPool::run` holding the
 // exclusive borrows they came from.
+#[allow(unsafe_code)]
 unsafe impl Send for Job {}
 
 struct Worker {
@@ -212,6 +213,7 @@ struct Worker {
 const SPINS: u32 = 100_000;
 
 impl SpinPool {
+    #[allow(unsafe_code)] // the workers read the slices a `Job` points at
     fn new(n: usize) -> Self {
         let workers = (0..n)
             .map(|_| {

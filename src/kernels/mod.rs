@@ -32,6 +32,7 @@ pub(crate) fn narrowed(test: &str, what: &str) {
 macro_rules! vectorised {
     ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) $body:block) => {
         $(#[$doc])*
+        #[allow(unsafe_code)] // expands where it is used: the one AVX-512 call below
         pub fn $name($($arg: $ty),*) {
             #[inline(always)]
             fn body($($arg: $ty),*) $body

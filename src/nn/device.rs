@@ -88,6 +88,7 @@ fn cuda_available() -> bool {
 
 /// Loads libtorch's CUDA backend (its static initialisers register it with libtorch),
 /// found through the binary's run path, beside `libtorch_cpu.so`.
+#[allow(unsafe_code)] // dlopen
 fn load_torch_cuda() -> bool {
     use std::os::raw::{c_char, c_int, c_void};
     unsafe extern "C" {

@@ -82,11 +82,13 @@ fn holder() -> String {
     format!("pid {} on {}", std::process::id(), host.trim())
 }
 
+#[allow(unsafe_code)] // renameat2, which std does not offer
 unsafe extern "C" {
     fn renameat2(olddirfd: i32, oldpath: *const std::ffi::c_char, newdirfd: i32, newpath: *const std::ffi::c_char, flags: u32) -> i32;
 }
 
 /// Atomically exchanges two directories (Linux `renameat2(RENAME_EXCHANGE)`).
+#[allow(unsafe_code)]
 fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
     use std::os::unix::ffi::OsStrExt;
     const AT_FDCWD: i32 = -100;
