@@ -43,18 +43,7 @@ impl Sweep {
 
     pub fn parse(path: &Path, text: &str, args: &[String]) -> Result<Sweep, ConfigError> {
         let plain = Pipeline::parse(path, text)?;
-        let mut fixed = Vec::new();
-        let mut axes: Vec<(String, Vec<(serde_json::Value, Source)>)> = Vec::new();
-        for a in args {
-            let (field, values) = parse_arg(a).map_err(|e| {
-                let prefix = format!("-S {a}: ");
-                arg_error(path, format!("-S {a}"), e.strip_prefix(&prefix).unwrap_or(&e).to_string())
-            })?;
-            match values.as_slice() {
-                [one] => fixed.push(Setting { path: field, value: one.clone(), source: Source::CommandLine }),
-                _ => axes.push((field, values.into_iter().map(|v| (v, Source::CommandLine)).collect())),
-            }
-        }
+        let (fixed, cli_axes) = command_line(path, args)?;
         let at = |keys: &[&str]| {
             let (line, column) = super::load::locate(text, keys);
             Source::Sweep { line, column }
@@ -75,35 +64,11 @@ impl Sweep {
             named.push((None, Vec::new()));
         }
         let file_axes = block.grid.iter().map(|(f, vs)| (f.clone(), vs.iter().map(|v| (v.clone(), at(&["sweep", "grid", f]))).collect()));
-        let axes: Vec<_> = file_axes.chain(axes).collect();
+        let axes: Vec<Axis> = file_axes.chain(cli_axes).collect();
         if let Some((f, _)) = axes.iter().find(|(_, vs)| vs.is_empty()) {
-            let (line, column) = super::load::locate(text, &["sweep", "grid", f]);
-            return Err(ConfigError {
-                file: path.into(),
-                line,
-                column,
-                message: format!("sweep.grid.{f} lists no value; give at least one"),
-                also: vec![],
-                setting: None,
-            });
+            return Err(error_at(path, text, &["sweep", "grid", f], format!("sweep.grid.{f} lists no value; give at least one")));
         }
-        // Every named variant with every combination of the axes, the first axis slowest; a
-        // combination's label is its variant's name and its axes' settings.
-        let mut combos: Vec<(Vec<String>, Vec<Setting>)> = named.into_iter().map(|(n, s)| (n.into_iter().collect(), s)).collect();
-        for (field, values) in &axes {
-            combos = combos
-                .into_iter()
-                .flat_map(|(label, s)| {
-                    values.iter().map(move |(v, src)| {
-                        let setting = Setting { path: field.clone(), value: v.clone(), source: src.clone() };
-                        let (mut label, mut s) = (label.clone(), s.clone());
-                        label.push(setting.label());
-                        s.push(setting);
-                        (label, s)
-                    })
-                })
-                .collect();
-        }
+        let combos = combinations(named, &axes);
         let name = plain.name.clone();
         let prefix: Vec<String> = fixed.iter().map(Setting::label).collect();
         let study = |own: &str| {
@@ -116,15 +81,8 @@ impl Sweep {
         let baseline = match &block.baseline {
             Some(b) => {
                 let i = labels.iter().position(|l| l == b || l.split(',').next() == Some(b.as_str())).ok_or_else(|| {
-                    let (line, column) = super::load::locate(text, &["sweep", "baseline"]);
-                    ConfigError {
-                        file: path.into(),
-                        line,
-                        column,
-                        message: format!("sweep.baseline `{b}` is no variant; name one of: {}", labels.join(", ")),
-                        also: vec![],
-                        setting: None,
-                    }
+                    let message = format!("sweep.baseline `{b}` is no variant; name one of: {}", labels.join(", "));
+                    error_at(path, text, &["sweep", "baseline"], message)
                 })?;
                 names[i].clone()
             }
@@ -231,6 +189,53 @@ impl Sweep {
             })
             .collect())
     }
+}
+
+/// A swept field and its values, each with where it was written.
+type Axis = (String, Vec<(serde_json::Value, Source)>);
+
+/// The command line's `-S` arguments: single values (applied to every variant) and lists
+/// (axes of the sweep).
+fn command_line(path: &Path, args: &[String]) -> Result<(Vec<Setting>, Vec<Axis>), ConfigError> {
+    let (mut fixed, mut axes) = (Vec::new(), Vec::new());
+    for a in args {
+        let (field, values) = parse_arg(a).map_err(|e| {
+            let prefix = format!("-S {a}: ");
+            arg_error(path, format!("-S {a}"), e.strip_prefix(&prefix).unwrap_or(&e).to_string())
+        })?;
+        match values.as_slice() {
+            [one] => fixed.push(Setting { path: field, value: one.clone(), source: Source::CommandLine }),
+            _ => axes.push((field, values.into_iter().map(|v| (v, Source::CommandLine)).collect())),
+        }
+    }
+    Ok((fixed, axes))
+}
+
+/// Every named variant with every combination of the axes, the first axis slowest; a
+/// combination's label is its variant's name and its axes' settings.
+fn combinations(named: Vec<(Option<String>, Vec<Setting>)>, axes: &[Axis]) -> Vec<(Vec<String>, Vec<Setting>)> {
+    let mut combos: Vec<(Vec<String>, Vec<Setting>)> = named.into_iter().map(|(n, s)| (n.into_iter().collect(), s)).collect();
+    for (field, values) in axes {
+        combos = combos
+            .into_iter()
+            .flat_map(|(label, s)| {
+                values.iter().map(move |(v, src)| {
+                    let setting = Setting { path: field.clone(), value: v.clone(), source: src.clone() };
+                    let (mut label, mut s) = (label.clone(), s.clone());
+                    label.push(setting.label());
+                    s.push(setting);
+                    (label, s)
+                })
+            })
+            .collect();
+    }
+    combos
+}
+
+/// A mistake in the file's `sweep:` block, at `keys`.
+fn error_at(path: &Path, text: &str, keys: &[&str], message: String) -> ConfigError {
+    let (line, column) = super::load::locate(text, keys);
+    ConfigError { file: path.into(), line, column, message, also: vec![], setting: None }
 }
 
 #[cfg(test)]
