@@ -15,6 +15,7 @@
 mod buffer;
 mod files;
 pub mod fused;
+mod scaling;
 pub mod update;
 
 use std::time::Instant;
@@ -24,12 +25,13 @@ use rand_chacha::ChaCha8Rng;
 
 pub use buffer::RolloutBuffer;
 pub use files::{checkpoint_dir, checkpoints, write_curve};
+use scaling::{Normalisers, scaled_rewards};
 
 use crate::data::{RunningMeanStd, TrajMeta};
 use crate::env::{Env, EnvId, Horizon, VecEnv};
 use crate::error::{Error, Result};
 use crate::nn::policy::CpuPolicy;
-use crate::nn::reward::{Composition, CtrlAction};
+use crate::nn::reward::Composition;
 use crate::nn::{ActorCritic, PolicyConfig, RewardEnsemble};
 use crate::rollout::{self, PolicyActor};
 use crate::seed::{self, Purpose};
@@ -199,26 +201,9 @@ pub struct Phases {
 /// Receives the policy and the global step every `checkpoint_every` updates.
 pub type SaveCheckpoint<'a> = &'a mut dyn FnMut(&ActorCritic, usize) -> Result<()>;
 
-/// The running normalisers of observations and of discounted returns (reward scaling).
-struct Normalisers {
-    obs: RunningMeanStd,
-    ret: RunningMeanStd,
-    disc_ret: Vec<f64>,
-    obs_clip: f64,
-}
-
-impl Normalisers {
-    fn obs(&self, raw: &[f32]) -> Vec<f32> {
-        let mut f = raw.to_vec();
-        self.obs.normalize(&mut f, self.obs_clip);
-        f
-    }
-}
-
 /// Trains a policy with PPO. `on_update` sees every update's statistics and returns false to
 /// stop early (the demonstrator stops at a target return); `checkpoint`, when given,
 /// receives the policy after the first update and every `cfg.checkpoint_every` updates.
-#[allow(clippy::needless_range_loop)] // k indexes the rewards, the buffer and the env slot together.
 pub fn train(
     id: EnvId,
     cfg: &PpoConfig,
@@ -232,11 +217,7 @@ pub fn train(
     let mut envs = VecEnv::new(id, cfg.num_envs, seed, cfg.threads)?;
     envs.set_horizon(cfg.horizon);
     let (n, od, ad) = (cfg.num_envs, envs.obs_dim(), envs.act_dim());
-    let mut pconfig = PolicyConfig::ppo(od, ad);
-    pconfig.hidden = cfg.hidden.clone();
-    let mut agent = crate::nn::seeded(seed, || ActorCritic::new(pconfig));
-    agent.env = Some(id.name().to_string());
-    agent.obs_clip = cfg.obs_clip;
+    let mut agent = new_agent(id, cfg, seed, od, ad);
     let mut updater = update::new(cfg, &agent)?;
     let mut norm =
         Normalisers { obs: RunningMeanStd::new(od), ret: RunningMeanStd::new(1), disc_ret: vec![0.0; n], obs_clip: cfg.obs_clip };
@@ -263,30 +244,7 @@ pub fn train(
         global_step += batch;
         let t = Instant::now();
 
-        // Rewards: the environment's or the learned one, then return-based scaling.
-        let mut rewards: Vec<f64> = match &mut reward {
-            RewardSource::GroundTruth => buf.env_rewards.clone(),
-            RewardSource::Learned { model, composition } => {
-                let cost_actions = match composition.ctrl_action {
-                    CtrlAction::Clipped => &buf.clipped_actions,
-                    CtrlAction::Raw => &buf.actions,
-                };
-                model.rl_reward(&buf.raw_next, &buf.clipped_actions, cost_actions, ad, composition, true)
-            }
-        };
-        let mut ended_learned = Vec::new();
-        for k in 0..batch {
-            let i = k % n;
-            episode_learned[i] += rewards[k];
-            norm.disc_ret[i] = norm.disc_ret[i] * cfg.gamma + rewards[k];
-            norm.ret.update_scalar(norm.disc_ret[i]);
-            rewards[k] = (rewards[k] / (norm.ret.var[0] + 1e-8).sqrt()).clamp(-cfg.reward_clip, cfg.reward_clip);
-            if buf.done(k) {
-                norm.disc_ret[i] = 0.0;
-                ended_learned.push(episode_learned[i]);
-                episode_learned[i] = 0.0;
-            }
-        }
+        let (mut rewards, ended_learned) = scaled_rewards(&mut reward, &buf, &mut norm, &mut episode_learned, cfg);
         if cfg.bootstrap_truncation {
             buf.bootstrap_truncations(&mut rewards, cfg.gamma, |f| policy.value(f, &mut scratch));
         }
@@ -295,34 +253,12 @@ pub fn train(
         phases.reward_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
 
-        let stats = updater.update(
-            &mut agent,
-            &update::Batch {
-                obs_dim: od,
-                act_dim: ad,
-                obs: &buf.nobs,
-                actions: &buf.actions,
-                logp: &buf.logp,
-                advantages: &advantages,
-                returns: &returns,
-                values: &buf.values,
-            },
-            lr,
-            &mut rng,
-        )?;
+        let stats = updater.update(&mut agent, &update::Batch::of(&buf, &advantages, &returns), lr, &mut rng)?;
         phases.update_s += t.elapsed().as_secs_f64();
 
         if !(stats.policy_loss.is_finite() && stats.value_loss.is_finite()) || rewards.iter().any(|r| !r.is_finite()) {
-            return Err(Error::Diverged(format!(
-                "PPO diverged at update {update} (step {global_step}): policy loss {}, value loss {}{}; lower ppo.lr (now {})",
-                stats.policy_loss,
-                stats.value_loss,
-                if rewards.iter().any(|r| !r.is_finite()) { ", non-finite rewards" } else { "" },
-                cfg.lr
-            )));
+            return Err(diverged(&stats, &rewards, update, global_step, cfg));
         }
-        let var_y = variance(&returns);
-        let resid: Vec<f32> = returns.iter().zip(&buf.values).map(|(r, v)| r - v).collect();
         agent.obs_norm = Some(norm.obs.clone());
         let eval = (cfg.eval_every > 0 && (global_step % cfg.eval_every < batch || update == updates))
             .then(|| evaluate(&agent, id, cfg.eval_episodes, seed::derive(seed, Purpose::PpoEval, update as u64), cfg.eval_mean))
@@ -338,7 +274,7 @@ pub fn train(
             entropy: stats.entropy,
             approx_kl: stats.approx_kl,
             clipfrac: stats.clipfrac,
-            explained_variance: if var_y == 0.0 { f64::NAN } else { 1.0 - variance(&resid) / var_y },
+            explained_variance: explained_variance(&returns, &buf.values),
             sps: batch as f64 / upd_start.elapsed().as_secs_f64(),
             eval,
         };
@@ -364,6 +300,34 @@ pub fn train(
         RewardSource::GroundTruth => None,
     };
     Ok(PpoResult { policy: agent, curve, wall_s, phases, reward_capped })
+}
+
+/// PPO's actor-critic for `id`, initialised from `seed`.
+fn new_agent(id: EnvId, cfg: &PpoConfig, seed: u64, obs_dim: usize, act_dim: usize) -> ActorCritic {
+    let mut pconfig = PolicyConfig::ppo(obs_dim, act_dim);
+    pconfig.hidden = cfg.hidden.clone();
+    let mut agent = crate::nn::seeded(seed, || ActorCritic::new(pconfig));
+    agent.env = Some(id.name().to_string());
+    agent.obs_clip = cfg.obs_clip;
+    agent
+}
+
+/// The refusal of an update whose losses or rewards are not finite.
+fn diverged(stats: &update::UpdateStats, rewards: &[f64], update: usize, global_step: usize, cfg: &PpoConfig) -> Error {
+    Error::Diverged(format!(
+        "PPO diverged at update {update} (step {global_step}): policy loss {}, value loss {}{}; lower ppo.lr (now {})",
+        stats.policy_loss,
+        stats.value_loss,
+        if rewards.iter().any(|r| !r.is_finite()) { ", non-finite rewards" } else { "" },
+        cfg.lr
+    ))
+}
+
+/// 1 - Var(returns - values) / Var(returns): how much of the returns the critic explains.
+fn explained_variance(returns: &[f32], values: &[f32]) -> f64 {
+    let var_y = variance(returns);
+    let resid: Vec<f32> = returns.iter().zip(values).map(|(r, v)| r - v).collect();
+    if var_y == 0.0 { f64::NAN } else { 1.0 - variance(&resid) / var_y }
 }
 
 /// Steps every environment `num_steps` times with the current policy, filling `buf`;

@@ -24,7 +24,21 @@ pub struct Batch<'a> {
     pub values: &'a [f32],
 }
 
-impl Batch<'_> {
+impl<'a> Batch<'a> {
+    /// The rollout in `buf` with its advantages and returns.
+    pub fn of(buf: &'a super::buffer::RolloutBuffer, advantages: &'a [f32], returns: &'a [f32]) -> Batch<'a> {
+        Batch {
+            obs_dim: buf.obs_dim,
+            act_dim: buf.act_dim,
+            obs: &buf.nobs,
+            actions: &buf.actions,
+            logp: &buf.logp,
+            advantages,
+            returns,
+            values: &buf.values,
+        }
+    }
+
     fn len(&self) -> usize {
         self.logp.len()
     }
