@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Lands replicates of the second locked test set (analysis/results/locked2/, four files), one
+# replicate after another, each task in turn, with the frozen binary that runs all of them
+# (built from commit 10fbc61 once per machine, beside the shared build). For each replicate R
+# and task T it writes, under analysis/results/locked2/report/r<R>/:
+#   T.ndjson      the replicate's stage manifests (`idrex export`), to commit;
+#   time-T.txt    /usr/bin/time -v of the run.
+# It prints whether every stage is stored, never a result: the set is reported once, after
+# the tenth replicate. Committing is left to the caller. Start it detached, it runs for hours:
+#   setsid nohup scripts/locked2-replicates.sh 0 1 > locked2.log 2>&1 < /dev/null &
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+[ $# -gt 0 ] || { echo "usage: $0 R [R...] (replicates of analysis/results/locked2/*.yaml, 0-9)" >&2; exit 2; }
+frozen_commit=10fbc61
+./scripts/bootstrap.sh
+cache="${IDREX_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/idrex}"
+frozen="$cache/idrex-$frozen_commit"
+if [ ! -x "$frozen" ]; then
+  src="$cache/locked-src-$frozen_commit"
+  [ -d "$src" ] || git worktree add --detach "$src" "$frozen_commit"
+  (cd "$src" && ./scripts/bootstrap.sh && cargo build --release --quiet --bin idrex)
+  target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' "$src/.cargo/config.toml")"
+  cp "$target/release/idrex" "$frozen.partial" && mv "$frozen.partial" "$frozen"
+fi
+set2=analysis/results/locked2
+for r in "$@"; do
+  out="$set2/report/r$r"
+  mkdir -p "$out"
+  for task in halfcheetah hopper walker2d ant; do
+    echo "$(date -u +%FT%TZ) replicate $r $task: start"
+    time_file="$out/time-$task.txt"
+    [ -f "$out/$task.ndjson" ] && time_file="$out/time-$task-recomputed.txt"
+    /usr/bin/time -v -o "$time_file" "$frozen" pipeline run "$set2/$task.yaml" --only-replicate "$r" --store artifacts --jobs 2
+    "$frozen" export "$set2/$task.yaml" --only-replicate "$r" --store artifacts --out "$out/$task.ndjson"
+    states="$("$frozen" pipeline plan "$set2/$task.yaml" --store artifacts | awk -v r="r$r/" 'index($3, r) == 1 {print $1}' | sort | uniq -c | tr -s ' \n' ' ')"
+    echo "$(date -u +%FT%TZ) replicate $r $task: stages$states"
+  done
+  echo "$(date -u +%FT%TZ) replicate $r: landed in $out"
+done
