@@ -2,7 +2,10 @@
 store, its ensemble's mean output per step on the ranked set's rollouts by noise level beside
 the forward velocity, the correlation of the per-step reward with each observation entry over
 the ranked set, and, on evaluation rollouts, the reward per step with the mean of each entry
-in units of the ranked set's spread (where PPO's policies sit outside what the ranking saw).
+in units of the ranked set's spread (where PPO's policies sit outside what the ranking saw),
+and how far the ensemble's members agree there (each member's output in units of its own
+spread over the ranked set; a conservative reward, mean minus k standard deviations across
+members, can only act where they disagree).
 
 Read with Python's `mcap` reader and numpy only (no idrex code): the reward's safetensors are
 evaluated here, a reward that reads part of each observation (`trex.observation`) from its
@@ -22,8 +25,9 @@ import numpy as np
 from mcap.reader import make_reader
 
 
-def load_reward(store, key):
-    """The ensemble's mean raw output, a function of whole observation rows."""
+def load_reward(store, key, members_apart=False):
+    """The ensemble's mean raw output, a function of whole observation rows (each member's
+    output, members x rows, with `members_apart`)."""
     d = f"{store}/{key}/reward"
     config = json.load(open(f"{d}/reward.json"))["config"]
     raw = open(f"{d}/reward.safetensors", "rb").read()
@@ -48,7 +52,7 @@ def load_reward(store, key):
                 if i < layers - 1:
                     h = np.maximum(h, 0)
             outs.append(h[:, 0])
-        return np.mean(outs, axis=0)
+        return np.array(outs) if members_apart else np.mean(outs, axis=0)
 
     return reward
 
@@ -82,6 +86,20 @@ def main():
     corr = [np.corrcoef(r, x[:, j])[0, 1] if x[:, j].std() > 0 else 0.0 for j in range(x.shape[1])]
     print("correlation of the reward per step with each entry:", " ".join(f"{j}:{c:+.2f}" for j, c in enumerate(corr)))
     mu, sd = x.mean(0), x.std(0) + 1e-8
+    members = load_reward(store, reward_key, members_apart=True)
+    per_member = members(x)
+    m_mu, m_sd = per_member.mean(1, keepdims=True), per_member.std(1, keepdims=True)
+
+    def agreement(rows):
+        z = (members(rows) - m_mu) / m_sd
+        return z.mean(1), z.std(0).mean()
+
+    for level in (min(noise), max(noise)):
+        means, spread = agreement(x[noise == level])
+        print(f"members on noise {level:.2f}: " + " ".join(f"{v:+.2f}" for v in means) + f" (own spreads), {spread:.2f} apart per step")
+    for key in evals:
+        means, spread = agreement(steps(store, key)[0])
+        print(f"members on eval {key[:12]}: " + " ".join(f"{v:+.2f}" for v in means) + f" (own spreads), {spread:.2f} apart per step")
     for key in evals:
         y, _ = steps(store, key)
         z = ((y - mu) / sd).mean(0)

@@ -3,7 +3,7 @@
 # another, with the frozen binary that ran all of them (built from commit 8e58d64 once per
 # machine, beside the shared build). After each replicate it writes, under
 # analysis/results/locked/report/r<R>/:
-#   manifests.ndjson   the replicate's stage manifests (`idrex export`), to commit;
+#   manifests.ndjson.zst   the replicate's stage manifests (`idrex export`), to commit;
 #   time.txt           /usr/bin/time -v of the run (time-recomputed.txt where the replicate
 #                      had landed before, on a machine whose store is gone: its report stays
 #                      as it landed, and the archive test compares the two);
@@ -33,10 +33,10 @@ for r in "$@"; do
   mkdir -p "$out"
   echo "$(date -u +%FT%TZ) replicate $r: start"
   /usr/bin/time -v -o "$out/$time_file" "$frozen" pipeline run "$locked/test.yaml" --only-replicate "$r" --store artifacts --jobs 2
-  ./dev export "$locked/test.yaml" --only-replicate "$r" --store artifacts --out "$out/manifests.ndjson"
+  ./dev export "$locked/test.yaml" --only-replicate "$r" --store artifacts --out "$out/manifests.ndjson.zst"
   if [ "$time_file" = time.txt ]; then
     archives=()
-    for a in "$locked"/report/r*/manifests.ndjson; do archives+=(--archive "$a"); done
+    for a in "$locked"/report/r*/manifests.ndjson.zst; do archives+=(--archive "$a"); done
     ./dev report --store artifacts "${archives[@]}" --out "$out" --figures svg
   fi
   echo "$(date -u +%FT%TZ) replicate $r: landed in $out"

@@ -3,7 +3,7 @@
 # replicate after another, each task in turn, with the frozen binary that runs all of them
 # (built from commit 10fbc61 once per machine, beside the shared build). For each replicate R
 # and task T it writes, under analysis/results/locked2/report/r<R>/:
-#   T.ndjson      the replicate's stage manifests (`idrex export`), to commit;
+#   T.ndjson.zst  the replicate's stage manifests (`idrex export`), to commit;
 #   time-T.txt    /usr/bin/time -v of the run.
 # It prints whether every stage is stored, never a result: the set is reported once, after
 # the tenth replicate. Committing is left to the caller. Start it detached, it runs for hours:
@@ -29,9 +29,11 @@ for r in "$@"; do
   for task in halfcheetah hopper walker2d ant; do
     echo "$(date -u +%FT%TZ) replicate $r $task: start"
     time_file="$out/time-$task.txt"
-    [ -f "$out/$task.ndjson" ] && time_file="$out/time-$task-recomputed.txt"
+    [ -f "$out/$task.ndjson.zst" ] && time_file="$out/time-$task-recomputed.txt"
     /usr/bin/time -v -o "$time_file" "$frozen" pipeline run "$set2/$task.yaml" --only-replicate "$r" --store artifacts --jobs 2
     "$frozen" export "$set2/$task.yaml" --only-replicate "$r" --store artifacts --out "$out/$task.ndjson"
+    # Committed compressed (the frozen binary writes plain NDJSON; idrex reads either).
+    zstd -19 -q -f --rm "$out/$task.ndjson"
     states="$("$frozen" pipeline plan "$set2/$task.yaml" --store artifacts | awk -v r="r$r/" 'index($3, r) == 1 {print $1}' | sort | uniq -c | tr -s ' \n' ' ')"
     echo "$(date -u +%FT%TZ) replicate $r $task: stages$states"
   done

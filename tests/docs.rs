@@ -271,18 +271,20 @@ fn the_stage_table_gives_each_kind_its_version() {
 }
 
 /// `analysis/` commits each figure once (as SVG; `idrex report --figures svg` writes only
-/// that), and every relative link of its pages resolves.
+/// that), no file twice (a per-replicate report keeps its words and tables; its figures are
+/// rebuilt from the archives), archives compressed, all of it under 25 MB; and every relative
+/// link of its pages resolves.
 #[test]
-fn analysis_commits_each_figure_once_and_its_links_resolve() {
+fn analysis_commits_each_file_once_and_its_links_resolve() {
     fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
         for e in std::fs::read_dir(dir).unwrap().flatten() {
             let p = e.path();
-            // Installed packages (the Foxglove reader's node_modules) are not ours.
-            if p.is_dir() && !p.ends_with("node_modules") {
-                walk(&p, out);
-            } else {
-                out.push(p);
+            // Installed packages (the Foxglove reader's node_modules) and the GPU runs' scratch
+            // output are not committed.
+            if p.ends_with("node_modules") || p.ends_with("gpu/out") {
+                continue;
             }
+            if p.is_dir() { walk(&p, out) } else { out.push(p) }
         }
     }
     let mut files = Vec::new();
@@ -290,6 +292,18 @@ fn analysis_commits_each_figure_once_and_its_links_resolve() {
     let twins: Vec<&PathBuf> =
         files.iter().filter(|p| p.extension().is_some_and(|e| e == "png") && p.with_extension("svg").exists()).collect();
     assert!(twins.is_empty(), "figures committed as both PNG and SVG: {twins:?}");
+    let plain: Vec<&PathBuf> = files.iter().filter(|p| p.extension().is_some_and(|e| e == "ndjson")).collect();
+    assert!(plain.is_empty(), "archives are committed compressed (`idrex export --out FILE.ndjson.zst`): {plain:?}");
+    let mut by_content: std::collections::BTreeMap<Vec<u8>, Vec<&PathBuf>> = Default::default();
+    let mut bytes = 0;
+    for f in &files {
+        let content = std::fs::read(f).unwrap();
+        bytes += content.len();
+        by_content.entry(content).or_default().push(f);
+    }
+    let copies: Vec<&Vec<&PathBuf>> = by_content.values().filter(|v| v.len() > 1).collect();
+    assert!(copies.is_empty(), "byte-identical files in analysis/ (keep one, link to it): {copies:?}");
+    assert!(bytes < 25_000_000, "analysis/ holds {bytes} bytes, over 25 MB");
     let mut checked = 0;
     for page in files.iter().filter(|p| p.extension().is_some_and(|e| e == "md")) {
         let text = std::fs::read_to_string(page).unwrap();

@@ -61,7 +61,8 @@ pub struct ExportArgs {
     /// Only replicate R's stages (a replicated study).
     #[arg(long, value_name = "R")]
     pub only_replicate: Option<usize>,
-    /// The archive to write: NDJSON, one manifest per line (`idrex report --archive` reads it).
+    /// The archive to write: NDJSON, one manifest per line (`idrex report --archive` reads it);
+    /// compressed with zstd where the name ends in `.zst` (`FILE.ndjson.zst`).
     #[arg(long, value_name = "FILE.ndjson")]
     pub out: PathBuf,
     #[command(flatten)]

@@ -5,6 +5,8 @@
 //! (by the caller's `key_of`: which parameters enter a key is the stage kind's to say), so an
 //! edited definition is refused; where a store holds the same key, both must name the
 //! same output digests (bytes depend on the key alone, so anything else is a defect).
+//! An archive whose name ends in `.zst` is written compressed (zstd); reading recognises
+//! compressed archives by their magic number, whatever their name.
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -33,13 +35,38 @@ pub fn line(manifest_json: &str) -> String {
     out
 }
 
-/// Writes `(key, manifest.json text)` pairs to `path` in key order, replacing it only once
-/// the whole file is written.
+/// zstd's level for archives: they are written once and committed, so the smallest file is
+/// worth the second it takes (a locked replicate's 1.4 MB of manifests: about 250 kB).
+const ZSTD_LEVEL: i32 = 19;
+
+/// zstd's frame magic number (RFC 8878), little-endian.
+const ZSTD_MAGIC: [u8; 4] = [0x28, 0xb5, 0x2f, 0xfd];
+
+/// Writes `(key, manifest.json text)` pairs to `path` in key order, compressed where the name
+/// ends in `.zst`, replacing it only once the whole file is written.
 pub fn write(path: &Path, manifests: &BTreeMap<String, String>) -> Result<()> {
     let text: String = manifests.values().map(|m| line(m) + "\n").collect();
-    let tmp = path.with_extension("ndjson.partial");
-    std::fs::write(&tmp, text).map_err(|e| Error::io(&tmp, e))?;
+    let bytes = if path.extension().is_some_and(|e| e == "zst") {
+        zstd::bulk::compress(text.as_bytes(), ZSTD_LEVEL).map_err(|e| Error::io(path, e))?
+    } else {
+        text.into_bytes()
+    };
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = std::path::PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes).map_err(|e| Error::io(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
+/// An archive's text, decompressed where it is a zstd frame.
+fn text_of(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = if bytes.starts_with(&ZSTD_MAGIC) {
+        zstd::stream::decode_all(bytes.as_slice()).map_err(|e| Error::file(path, format!("a damaged zstd archive ({e}); restore it from git")))?
+    } else {
+        bytes
+    };
+    String::from_utf8(bytes).map_err(|_| Error::file(path, "not UTF-8 text; write archives with `idrex export`"))
 }
 
 /// The text of a top-level field of a compact JSON object (an archive line).
@@ -80,7 +107,7 @@ fn field<'a>(line: &'a str, name: &str) -> Option<&'a str> {
 /// Reads an archive, checking each line's key against `key_of(manifest, its parameters'
 /// text as written)`.
 pub fn read(path: &Path, key_of: impl Fn(&Manifest, &str) -> Result<String>) -> Result<Vec<Manifest>> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = text_of(path)?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let at = |why: String| Error::file(path, format!("line {}: {why}", i + 1));
@@ -189,6 +216,15 @@ mod tests {
         expected.sort_by(|x, y| x.key.cmp(&y.key));
         assert_eq!(back, expected);
         assert!(!path.with_extension("ndjson.partial").exists());
+        // The same, compressed: smaller, and read back to the same manifests.
+        let zst = dir.join("a.ndjson.zst");
+        write(&zst, &texts).unwrap();
+        assert!(std::fs::read(&zst).unwrap().starts_with(&ZSTD_MAGIC));
+        assert_eq!(read(&zst, key_of).unwrap(), expected);
+        assert!(!dir.join("a.ndjson.zst.partial").exists());
+        std::fs::write(&zst, &std::fs::read(&zst).unwrap()[..20]).unwrap();
+        let err = read(&zst, key_of).unwrap_err().to_string();
+        assert!(err.contains("a.ndjson.zst") && err.contains("damaged zstd archive"), "{err}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
