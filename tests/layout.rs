@@ -1,5 +1,6 @@
 //! The code's layout stays readable: no source file holds more than 450 production lines
-//! (every line outside a `#[cfg(test)]` item, wherever that item sits), no two modules import
+//! (every line outside a `#[cfg(test)]` item, wherever that item sits), no production
+//! function more than 100 lines (signature to closing brace), no two modules import
 //! each other, directly or through others (a module and its own submodules count as one
 //! room), and no two folders do either. Imports are read from `use` items and `crate::`
 //! paths in the code, not from comments. Each check is also run on planted violations, so a
@@ -8,6 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 const MAX_LINES: usize = 450;
+const MAX_FN_LINES: usize = 100;
 
 /// Every `.rs` file under `src/` with its module path (`pipeline::stage::eval`).
 fn modules() -> BTreeMap<String, PathBuf> {
@@ -225,6 +227,72 @@ fn no_source_file_holds_over_450_production_lines() {
         })
         .collect();
     assert!(long.is_empty(), "over {MAX_LINES} production lines: {long:?}");
+}
+
+/// Each function of the production code, as (name, lines from its `fn` line to its closing
+/// brace); nested functions count inside their parent too.
+fn function_lengths(lines: &[&str]) -> Vec<(String, usize)> {
+    let mut out = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let code: String = code_chars(line).into_iter().collect();
+        let Some(at) = code.find("fn ").filter(|&at| at == 0 || code[..at].ends_with(' ') || code[..at].ends_with('(')) else { continue };
+        let name: String = code[at + 3..].chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        if name.is_empty() {
+            continue;
+        }
+        // From the signature's first `{` to the brace that closes it; a `;` first is a
+        // declaration without a body.
+        let (mut depth, mut opened) = (0i64, false);
+        for (j, l) in lines.iter().enumerate().skip(i) {
+            for c in code_chars(l) {
+                match c {
+                    '{' => (depth, opened) = (depth + 1, true),
+                    '}' => depth -= 1,
+                    ';' if !opened => depth = -1,
+                    _ => {}
+                }
+                if depth < 0 || (opened && depth == 0) {
+                    break;
+                }
+            }
+            if depth < 0 {
+                break;
+            }
+            if opened && depth == 0 {
+                out.push((name.clone(), j - i + 1));
+                break;
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn no_function_holds_over_100_lines() {
+    let long: Vec<String> = modules()
+        .values()
+        .flat_map(|p| {
+            let text = std::fs::read_to_string(p).unwrap();
+            let lines = production(&text);
+            function_lengths(&lines)
+                .into_iter()
+                .filter(|(_, n)| *n > MAX_FN_LINES)
+                .map(|(f, n)| format!("{} `{f}` ({n} lines)", p.display()))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(long.is_empty(), "functions over {MAX_FN_LINES} lines: {long:?}");
+}
+
+#[test]
+fn function_lengths_count_from_the_signature_to_the_closing_brace() {
+    let text = "pub fn short(a: u8) -> u8 {\n    a\n}\nfn decl(x: u8);\nimpl A {\n    pub(crate) fn long(\n        x: u8,\n    ) -> String {\n        let s = \"}\";\n        if x > 0 { f(|y| { y }) }\n        s.into()\n    }\n}\n";
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(function_lengths(&lines), [("short".to_string(), 3), ("long".to_string(), 7)]);
+    // A planted function one line over the limit is found.
+    let long = format!("fn big() {{\n{}}}\n", "    step();\n".repeat(MAX_FN_LINES - 1));
+    let lines: Vec<&str> = long.lines().collect();
+    assert_eq!(function_lengths(&lines), [("big".to_string(), MAX_FN_LINES + 1)]);
 }
 
 #[test]

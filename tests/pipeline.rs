@@ -846,8 +846,7 @@ fn the_committed_archives_rebuild_the_locked_reports() {
     let mut rebuilt = 0;
     for d in &dirs {
         let committed = |t: &str| std::fs::read_to_string(d.join(t)).ok();
-        let covered: std::collections::BTreeSet<usize> =
-            committed("returns.csv").unwrap().lines().skip(1).filter_map(replicate).collect();
+        let covered: std::collections::BTreeSet<usize> = committed("returns.csv").unwrap().lines().skip(1).filter_map(replicate).collect();
         let out = dir.join(d.file_name().unwrap().to_str().unwrap());
         let mut args = vec!["report".to_string(), "--store".into(), dir.join("none").display().to_string()];
         for r in &covered {
@@ -868,8 +867,7 @@ fn the_committed_archives_rebuild_the_locked_reports() {
             let Some(theirs) = committed(table) else { continue };
             let ours = std::fs::read_to_string(out.join(table)).unwrap();
             let (ours_head, theirs_head) = (ours.lines().next().unwrap(), theirs.lines().next().unwrap());
-            let columns: Vec<Option<usize>> =
-                theirs_head.split(',').map(|c| ours_head.split(',').position(|o| o == c)).collect();
+            let columns: Vec<Option<usize>> = theirs_head.split(',').map(|c| ours_head.split(',').position(|o| o == c)).collect();
             assert!(columns.iter().all(Option::is_some), "{}/{table}: a column is gone: {theirs_head}", d.display());
             for (theirs_row, ours_row) in theirs.lines().zip(ours.lines()).skip(1) {
                 let ours_row: Vec<&str> = ours_row.split(',').collect();

@@ -5,12 +5,13 @@
 //!
 //! The layers, lowest first (each imports only those before it): [`kind`] (the stage kinds'
 //! names and versions), [`config`] (the file's schema), [`stage`] (the bodies),
-//! [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG), [`sweep`]
+//! [`check`] (a parsed file's every check) and [`load`] (a file read and checked into a [`Pipeline`]), [`graph`] (the DAG), [`sweep`]
 //! (a file's variants, their graphs joined),
 //! [`calibrate`], [`schedule`] and [`cores`] (this processor's speed, ordering and threads), [`test_set`] (locked test sets),
 //! [`gaps`] (BC far below its demonstrations), [`runner`], [`slurm`], [`recompute`] and
 //! [`plots`].
 pub mod calibrate;
+pub mod check;
 pub mod config;
 pub mod cores;
 pub mod gaps;

@@ -121,6 +121,127 @@ pub fn record(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name:
     written
 }
 
+/// The demonstrations' mean and spread as flat lines across the degradation plot.
+fn demonstrations_band(rec: &Recording, (mean, std): (f64, f64)) {
+    for (leaf, value, name, style) in [
+        ("mean", mean, "demonstrations: mean", Style::Line),
+        ("plus_std", mean + std, "demonstrations: + std", Style::ThinLine),
+        ("minus_std", mean - std, "demonstrations: - std", Style::ThinLine),
+    ] {
+        let e = format!("degradation/demonstrations/{leaf}");
+        rec.series(&e, name, style);
+        rec.scalar(&e, 0, value);
+        rec.scalar(&e, 1000, value);
+    }
+}
+
+/// A ranked set's return against its noise level (x in ‰), with its spread.
+fn degradation_curve(rec: &Recording, node: &str, levels: &[DegradationLevel]) {
+    let e = entity(node);
+    for (leaf, name, style) in
+        [("mean", "mean", Style::Line), ("plus_std", "+ std", Style::ThinLine), ("minus_std", "- std", Style::ThinLine)]
+    {
+        rec.series(&format!("degradation/{e}/{leaf}"), &format!("{node}: {name}"), style);
+    }
+    for l in levels {
+        let t = (l.noise * 1000.0).round() as i64;
+        rec.scalar(&format!("degradation/{e}/mean"), t, l.mean);
+        rec.scalar(&format!("degradation/{e}/plus_std"), t, l.mean + l.std);
+        rec.scalar(&format!("degradation/{e}/minus_std"), t, l.mean - l.std);
+    }
+}
+
+/// Predicted against true return as a point series over the true return.
+fn scatter(rec: &Recording, e: &str, name: &str, truth: &[f64], predicted: &[f64]) {
+    let r = crate::stats::pearson(truth, predicted);
+    let name = if r.is_finite() { format!("{name} (Pearson {r:.2})") } else { name.to_string() };
+    rec.series(e, &name, Style::Points);
+    for (&t, &p) in truth.iter().zip(predicted) {
+        rec.scalar(e, t.round() as i64, p);
+    }
+}
+
+/// What the nodes' plots gather for the plots drawn after them.
+#[derive(Default)]
+struct Gathered {
+    /// Reward node entity -> (its name, unseen evaluation returns, their predicted returns).
+    unseen: BTreeMap<String, (String, Vec<f64>, Vec<f64>)>,
+    has_clones: bool,
+    /// (method, replicate) -> each run's final-policy mean return.
+    finals: BTreeMap<(Method, usize), Vec<f64>>,
+}
+
+/// The plots of one stage's metrics.
+fn plot_node(rec: &Recording, n: &super::graph::Node, m: &Metrics, gathered: &mut Gathered) {
+    let e = entity(&n.name);
+    match m {
+        Metrics::NoiseRollouts(x) => degradation_curve(rec, &n.name, &x.degradation),
+        Metrics::InterpolationRollouts(x) | Metrics::ActionNoiseRollouts(x) => degradation_curve(rec, &n.name, &x.degradation),
+        Metrics::MultiBcRollouts(x) => {
+            degradation_curve(rec, &n.name, &x.degradation);
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+            let (sources, clones): (Vec<f64>, Vec<f64>) =
+                x.clones.iter().map(|c| (mean(&c.fidelity.source_returns), mean(&c.fidelity.clone_returns))).unzip();
+            scatter(rec, &format!("clones/{e}"), &format!("{}: clones", n.name), &sources, &clones);
+            gathered.has_clones = true;
+        }
+        Metrics::Trex(t) => {
+            let set = &t.train_set.scored;
+            scatter(rec, &format!("reward/{e}/training_set"), &format!("{}: training set", n.name), &set.truth, &set.predicted);
+            scatter(rec, &format!("reward/{e}/demonstrations"), &format!("{}: demonstrations", n.name), &t.demos.truth, &t.demos.predicted);
+            for (i, model) in t.models.iter().enumerate() {
+                let loss = format!("trex_loss/{e}/model{i}");
+                rec.series(&loss, &format!("{} model {i}", n.name), Style::ThinLine);
+                for p in &model.curve {
+                    rec.scalar(&loss, p.iteration as i64, p.loss);
+                }
+            }
+        }
+        Metrics::Ppo(x) => {
+            let e = format!("ppo_true/{e}");
+            rec.series_coloured(&e, &n.name, Style::ThinLine, Method::of_node(&n.name).map_or([0, 0, 0], Method::colour));
+            for p in &x.curve {
+                if let Some(r) = p.true_return {
+                    rec.scalar(&e, p.step as i64, r);
+                }
+            }
+        }
+        Metrics::Eval(x) => {
+            if let super::stage::Params::Eval(p) = &n.params {
+                gathered.finals.entry((p.method, p.replicate)).or_default().push(x.summary.stats.mean);
+            }
+            // Unseen rollouts scored by the reward this run trained on.
+            if let Some(acc) = &x.reward
+                && let super::stage::Inputs::Eval(i) = &n.inputs
+                && let Some(src) = &i.reward
+            {
+                let entry = gathered.unseen.entry(entity(src)).or_insert_with(|| (src.clone(), vec![], vec![]));
+                entry.1.extend(&x.summary.returns);
+                entry.2.extend(&acc.predicted_returns);
+            }
+        }
+        Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) => {}
+    }
+}
+
+/// A replicated study's final returns per method and replicate (the mean over its runs);
+/// whether there was more than one replicate to draw.
+fn replicate_points(rec: &Recording, finals: &BTreeMap<(Method, usize), Vec<f64>>) -> bool {
+    let replicates: std::collections::BTreeSet<usize> = finals.keys().map(|(_, r)| *r).collect();
+    if replicates.len() < 2 {
+        return false;
+    }
+    let mut named = std::collections::BTreeSet::new();
+    for ((m, r), runs) in finals {
+        let e = format!("replicates/{}", m.name());
+        if named.insert(*m) {
+            rec.series_coloured(&e, m.label(), Style::Points, m.colour());
+        }
+        rec.scalar(&e, *r as i64, runs.iter().sum::<f64>() / runs.len() as f64);
+    }
+    true
+}
+
 fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str) -> Result<()> {
     let rec = Recording::create(path, name)?;
     let done: BTreeMap<&str, &str> = outcomes
@@ -133,106 +254,20 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         let m = store.check(done.get(node)?).ok()?;
         Metrics::from_json(n.kind(), &m.metrics).ok()
     };
-    let demos = match metrics("demos") {
-        Some(Metrics::Demos(s) | Metrics::DemosImport(s)) => Some((s.stats.mean, s.stats.std)),
-        _ => None,
-    };
-    if let Some((dm, ds)) = demos {
-        for (leaf, value, name, style) in [
-            ("mean", dm, "demonstrations: mean", Style::Line),
-            ("plus_std", dm + ds, "demonstrations: + std", Style::ThinLine),
-            ("minus_std", dm - ds, "demonstrations: - std", Style::ThinLine),
-        ] {
-            let e = format!("degradation/demonstrations/{leaf}");
-            rec.series(&e, name, style);
-            rec.scalar(&e, 0, value);
-            rec.scalar(&e, 1000, value);
-        }
+    if let Some(Metrics::Demos(s) | Metrics::DemosImport(s)) = metrics("demos") {
+        demonstrations_band(&rec, (s.stats.mean, s.stats.std));
     }
-    let degradation_curve = |node: &str, levels: &[DegradationLevel]| {
-        let e = entity(node);
-        for (leaf, name, style) in
-            [("mean", "mean", Style::Line), ("plus_std", "+ std", Style::ThinLine), ("minus_std", "- std", Style::ThinLine)]
-        {
-            rec.series(&format!("degradation/{e}/{leaf}"), &format!("{node}: {name}"), style);
-        }
-        for l in levels {
-            let t = (l.noise * 1000.0).round() as i64;
-            rec.scalar(&format!("degradation/{e}/mean"), t, l.mean);
-            rec.scalar(&format!("degradation/{e}/plus_std"), t, l.mean + l.std);
-            rec.scalar(&format!("degradation/{e}/minus_std"), t, l.mean - l.std);
-        }
-    };
-    // Predicted against true return as a point series over the true return.
-    let scatter = |e: &str, name: &str, truth: &[f64], predicted: &[f64]| {
-        let r = crate::stats::pearson(truth, predicted);
-        let name = if r.is_finite() { format!("{name} (Pearson {r:.2})") } else { name.to_string() };
-        rec.series(e, &name, Style::Points);
-        for (&t, &p) in truth.iter().zip(predicted) {
-            rec.scalar(e, t.round() as i64, p);
-        }
-    };
-    let mut unseen: BTreeMap<String, (String, Vec<f64>, Vec<f64>)> = BTreeMap::new();
-    let mut has_clones = false;
-    // (method, replicate) -> each run's final-policy mean return.
-    let mut finals: BTreeMap<(Method, usize), Vec<f64>> = BTreeMap::new();
+    let mut gathered = Gathered::default();
     let mut lines = vec![format!("# {name}\n\n| node | kind | status |\n|---|---|---|")];
     for n in &g.nodes {
         let status = outcomes.iter().find(|o| o.node == n.name).map_or("-", |o| status_name(&o.status));
         lines.push(format!("| {} | {} | {status} |", n.name, n.kind().name()));
-        let Some(m) = metrics(&n.name) else { continue };
-        let e = entity(&n.name);
-        match &m {
-            Metrics::NoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
-            Metrics::InterpolationRollouts(x) | Metrics::ActionNoiseRollouts(x) => degradation_curve(&n.name, &x.degradation),
-            Metrics::MultiBcRollouts(x) => {
-                degradation_curve(&n.name, &x.degradation);
-                let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-                let (sources, clones): (Vec<f64>, Vec<f64>) =
-                    x.clones.iter().map(|c| (mean(&c.fidelity.source_returns), mean(&c.fidelity.clone_returns))).unzip();
-                scatter(&format!("clones/{e}"), &format!("{}: clones", n.name), &sources, &clones);
-                has_clones = true;
-            }
-            Metrics::Trex(t) => {
-                let set = &t.train_set.scored;
-                scatter(&format!("reward/{e}/training_set"), &format!("{}: training set", n.name), &set.truth, &set.predicted);
-                scatter(&format!("reward/{e}/demonstrations"), &format!("{}: demonstrations", n.name), &t.demos.truth, &t.demos.predicted);
-                for (i, model) in t.models.iter().enumerate() {
-                    let loss = format!("trex_loss/{e}/model{i}");
-                    rec.series(&loss, &format!("{} model {i}", n.name), Style::ThinLine);
-                    for p in &model.curve {
-                        rec.scalar(&loss, p.iteration as i64, p.loss);
-                    }
-                }
-            }
-            Metrics::Ppo(x) => {
-                let e = format!("ppo_true/{e}");
-                rec.series_coloured(&e, &n.name, Style::ThinLine, Method::of_node(&n.name).map_or([0, 0, 0], Method::colour));
-                for p in &x.curve {
-                    if let Some(r) = p.true_return {
-                        rec.scalar(&e, p.step as i64, r);
-                    }
-                }
-            }
-            Metrics::Eval(x) => {
-                if let super::stage::Params::Eval(p) = &n.params {
-                    finals.entry((p.method, p.replicate)).or_default().push(x.summary.stats.mean);
-                }
-                // Unseen rollouts scored by the reward this run trained on.
-                if let Some(acc) = &x.reward
-                    && let super::stage::Inputs::Eval(i) = &n.inputs
-                    && let Some(src) = &i.reward
-                {
-                    let entry = unseen.entry(entity(src)).or_insert_with(|| (src.clone(), vec![], vec![]));
-                    entry.1.extend(&x.summary.returns);
-                    entry.2.extend(&acc.predicted_returns);
-                }
-            }
-            Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) => {}
+        if let Some(m) = metrics(&n.name) {
+            plot_node(&rec, n, &m, &mut gathered);
         }
     }
-    for (e, (src, truth, predicted)) in unseen {
-        scatter(&format!("reward/{e}/unseen"), &format!("{src}: unseen evaluation rollouts"), &truth, &predicted);
+    for (e, (src, truth, predicted)) in &gathered.unseen {
+        scatter(&rec, &format!("reward/{e}/unseen"), &format!("{src}: unseen evaluation rollouts"), truth, predicted);
     }
     checkpoint_curves(&rec, g, &metrics);
     rec.markdown("pipeline", &lines.join("\n"));
@@ -246,20 +281,10 @@ fn draw(g: &Graph, outcomes: &[Outcome], store: &Store, path: &Path, name: &str)
         plot("T-REX loss (x: iteration)", "trex_loss"),
         Panel::Text { title: "Pipeline stages".into(), entity: "pipeline".into() },
     ];
-    // A replicated study: each replicate's final returns per method (the mean over its runs).
-    let replicates: std::collections::BTreeSet<usize> = finals.keys().map(|(_, r)| *r).collect();
-    if replicates.len() > 1 {
-        let mut named = std::collections::BTreeSet::new();
-        for ((m, r), runs) in &finals {
-            let e = format!("replicates/{}", m.name());
-            if named.insert(*m) {
-                rec.series_coloured(&e, m.label(), Style::Points, m.colour());
-            }
-            rec.scalar(&e, *r as i64, runs.iter().sum::<f64>() / runs.len() as f64);
-        }
+    if replicate_points(&rec, &gathered.finals) {
         panels.push(plot("Each replicate's final policy: true return, mean over its runs (x: replicate)", "replicates"));
     }
-    if has_clones {
+    if gathered.has_clones {
         panels.push(plot("Multi-BC clones against their sources (x: source's true return; y: clone's, noise-free)", "clones"));
     }
     rec.layout(path, panels)?;

@@ -199,12 +199,107 @@ pub fn minutes(seconds: f64) -> String {
     if seconds < 60.0 { format!("{:.0} s", seconds.max(0.0)) } else { format!("{:.0} min", seconds / 60.0) }
 }
 
-pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
-    for f in &opts.force {
-        if graph.get(f).is_none() {
-            let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
-            return Err(Error::Invalid(format!("--force {f}: no such node; the nodes are {}", names.join(", "))));
+/// What a run knows while it runs: each ended stage's status, the running stages' cores and
+/// start times, and the seconds taken and estimated by the stages computed so far (how far
+/// off the estimates are on this machine today).
+struct Board<'g> {
+    graph: &'g Graph,
+    keys: BTreeMap<String, String>,
+    /// Stages whose stored artifact is reused (present and not forced).
+    reused: BTreeSet<String>,
+    estimates: super::schedule::Estimates,
+    status: BTreeMap<String, Status>,
+    running: BTreeMap<String, usize>,
+    since: BTreeMap<String, Instant>,
+    taken: f64,
+    estimated: f64,
+}
+
+impl<'g> Board<'g> {
+    /// Marks the descendants of failures skipped; returns how many it marked.
+    fn skip_descendants_of_failures(&mut self) -> u64 {
+        let mut skipped = 0;
+        for n in &self.graph.nodes {
+            if self.status.contains_key(&n.name) {
+                continue;
+            }
+            let failed = |i: &String| matches!(self.status.get(i), Some(Status::Failed { .. } | Status::Skipped { .. }));
+            if let Some((_, bad)) = n.inputs.iter().find(|(_, i)| failed(i)) {
+                self.status.insert(n.name.clone(), Status::Skipped { because: bad.clone() });
+                skipped += 1;
+            }
         }
+        skipped
+    }
+
+    /// The stages whose inputs are all done, most estimated work behind them first (stable:
+    /// equal estimates keep the graph's order).
+    fn ready(&self, priority: &BTreeMap<String, f64>) -> Vec<&'g Node> {
+        let done = |i: &String| matches!(self.status.get(i), Some(Status::Cached | Status::Computed { .. }));
+        let mut ready: Vec<&Node> = self
+            .graph
+            .nodes
+            .iter()
+            .filter(|n| !self.status.contains_key(&n.name) && !self.running.contains_key(&n.name))
+            .filter(|n| n.inputs.iter().all(|(_, i)| done(i)))
+            .collect();
+        ready.sort_by(|a, b| priority[&b.name].total_cmp(&priority[&a.name]));
+        ready
+    }
+
+    /// How long the rest should take with `jobs`, each estimate scaled by `scale`.
+    fn left(&self, jobs: usize, scale: f64) -> f64 {
+        let cost = |n: &Node| {
+            if self.status.contains_key(&n.name) || self.reused.contains(&n.name) {
+                0.0
+            } else {
+                let est = self.estimates.seconds(n) * scale;
+                self.since.get(&n.name).map_or(est, |t| (est - t.elapsed().as_secs_f64()).max(0.0))
+            }
+        };
+        super::schedule::makespan(self.graph, &cost, jobs)
+    }
+
+    /// Records a stage's end; returns the new "about N min left".
+    fn ended(&mut self, name: &str, s: Status, jobs: usize) -> String {
+        self.running.remove(name);
+        if let (Status::Computed { wall_s }, Some(n)) = (&s, self.graph.get(name)) {
+            self.taken += wall_s;
+            self.estimated += self.estimates.seconds(n);
+        }
+        self.since.remove(name);
+        self.status.insert(name.to_string(), s);
+        // Calibrated once a minute of estimated work has run: short stages say little.
+        let scale = if self.estimated > 60.0 { (self.taken / self.estimated).clamp(0.25, 4.0) } else { 1.0 };
+        format!("about {} left", minutes(self.left(jobs, scale)))
+    }
+}
+
+/// The cores the `starting` stages share: what the running ones leave, no more than other
+/// processes leave idle where a stage could use several, and a thread each where more jobs
+/// than cores were asked for.
+fn free_cores(starting: &[&Node], in_use: usize, jobs: usize, cores: usize) -> usize {
+    let mut free = cores.saturating_sub(in_use);
+    if starting.iter().any(|n| n.kind().parallel()) && free > starting.len() {
+        free = free.min(super::cores::idle_elsewhere().unwrap_or(free).max(starting.len()));
+    }
+    if jobs > cores { free.max(starting.len()) } else { free }
+}
+
+/// The line an ended stage leaves above the bars: what happened and how long it took.
+fn ended_line(name: &str, s: &Status) -> Option<String> {
+    match s {
+        Status::Failed { error, .. } => Some(format!("  failed    {name}: {error}")),
+        Status::Computed { wall_s } => Some(format!("  computed  {name} ({wall_s:.1} s)")),
+        Status::Cached => Some(format!("  reused    {name}")),
+        Status::Skipped { .. } => None,
+    }
+}
+
+pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) -> Result<Vec<Outcome>> {
+    if let Some(f) = opts.force.iter().find(|f| graph.get(f).is_none()) {
+        let names: Vec<&str> = graph.nodes.iter().map(|n| n.name.as_str()).collect();
+        return Err(Error::Invalid(format!("--force {f}: no such node; the nodes are {}", names.join(", "))));
     }
     let _using = store.in_use()?;
     store.clean_stale_staging();
@@ -212,77 +307,45 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
     // Critical path first: the ready stage with the most estimated work behind it starts.
     // Ordering only, so the manifests are read without re-hashing their outputs.
     let written = store.unverified_manifests()?;
-    let estimates = super::schedule::Estimates::from_manifests(&written);
     let present: BTreeSet<&str> = written.iter().map(|m| m.key.as_str()).collect();
-    let priority = super::schedule::remaining(graph, &|n| {
-        if present.contains(keys[&n.name].as_str()) && !opts.force.contains(&n.name) { 0.0 } else { estimates.seconds(n) }
-    });
-    let jobs = opts.jobs.max(1);
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let reused: BTreeSet<String> = graph
+        .nodes
+        .iter()
+        .filter(|n| present.contains(keys[&n.name].as_str()) && !opts.force.contains(&n.name))
+        .map(|n| n.name.clone())
+        .collect();
+    let estimates = super::schedule::Estimates::from_manifests(&written);
+    let priority = super::schedule::remaining(graph, &|n| if reused.contains(&n.name) { 0.0 } else { estimates.seconds(n) });
+    let (jobs, cores) = (opts.jobs.max(1), std::thread::available_parallelism().map_or(1, |n| n.get()));
     let multi = MultiProgress::with_draw_target(if opts.progress { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() });
     let overall = multi.add(ProgressBar::new(graph.nodes.len() as u64));
     overall.set_style(ProgressStyle::with_template("[{elapsed_precise}] {bar:30} {pos}/{len} stages {wide_msg}").expect("template"));
     let stage_style = working_style();
-
-    let mut status: BTreeMap<String, Status> = BTreeMap::new();
-    // Running stage -> the cores it was granted, and when it started.
-    let mut running: BTreeMap<String, usize> = BTreeMap::new();
-    let mut since: BTreeMap<String, Instant> = BTreeMap::new();
-    // Seconds taken and estimated by the stages computed so far: how far off the estimates
-    // are on this machine today.
-    let (mut taken, mut estimated) = (0.0, 0.0);
-    let left = |status: &BTreeMap<String, Status>, since: &BTreeMap<String, Instant>, scale: f64| {
-        let cost = |n: &Node| {
-            if status.contains_key(&n.name) || (present.contains(keys[&n.name].as_str()) && !opts.force.contains(&n.name)) {
-                0.0
-            } else {
-                let est = estimates.seconds(n) * scale;
-                since.get(&n.name).map_or(est, |t| (est - t.elapsed().as_secs_f64()).max(0.0))
-            }
-        };
-        super::schedule::makespan(graph, &cost, opts.jobs.max(1))
+    let mut board = Board {
+        graph,
+        keys,
+        reused,
+        estimates,
+        status: BTreeMap::new(),
+        running: BTreeMap::new(),
+        since: BTreeMap::new(),
+        taken: 0.0,
+        estimated: 0.0,
     };
-    overall.set_message(format!("about {} left", minutes(left(&status, &since, 1.0))));
+    overall.set_message(format!("about {} left", minutes(board.left(jobs, 1.0))));
     let (tx, rx) = mpsc::channel::<(String, Status)>();
     std::thread::scope(|scope| {
         loop {
-            // Skip the descendants of failures.
-            for n in &graph.nodes {
-                if status.contains_key(&n.name) {
-                    continue;
-                }
-                if let Some((_, bad)) =
-                    n.inputs.iter().find(|(_, i)| matches!(status.get(*i), Some(Status::Failed { .. } | Status::Skipped { .. })))
-                {
-                    status.insert(n.name.clone(), Status::Skipped { because: bad.clone() });
-                    overall.inc(1);
-                }
-            }
-            let mut ready: Vec<&Node> = graph
-                .nodes
-                .iter()
-                .filter(|n| !status.contains_key(&n.name) && !running.contains_key(&n.name))
-                .filter(|n| n.inputs.iter().all(|(_, i)| matches!(status.get(i), Some(Status::Cached | Status::Computed { .. }))))
-                .collect();
-            // Stable: equal estimates keep the graph's order.
-            ready.sort_by(|a, b| priority[&b.name].total_cmp(&priority[&a.name]));
-            let starting: Vec<&Node> = ready.into_iter().take(jobs.saturating_sub(running.len())).collect();
-            let mut free = cores.saturating_sub(running.values().sum());
-            if starting.iter().any(|n| n.kind().parallel()) && free > starting.len() {
-                // Extra cores only where other processes leave them idle.
-                free = free.min(super::cores::idle_elsewhere().unwrap_or(free).max(starting.len()));
-            }
-            if jobs > cores {
-                // More jobs than cores was asked for: every job gets a thread.
-                free = free.max(starting.len());
-            }
+            overall.inc(board.skip_descendants_of_failures());
+            let starting: Vec<&Node> = board.ready(&priority).into_iter().take(jobs.saturating_sub(board.running.len())).collect();
+            let free = free_cores(&starting, board.running.values().sum(), jobs, cores);
             for (n, threads) in starting.iter().zip(super::cores::grants(&starting, free)).filter(|(_, t)| *t > 0) {
                 let n = *n;
                 tracing::debug!(stage = %n.name, threads, "starting");
-                running.insert(n.name.clone(), threads);
-                since.insert(n.name.clone(), Instant::now());
-                let key = keys[&n.name].clone();
-                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), keys[src].clone())).collect();
+                board.running.insert(n.name.clone(), threads);
+                board.since.insert(n.name.clone(), Instant::now());
+                let key = board.keys[&n.name].clone();
+                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), board.keys[src].clone())).collect();
                 let forced = opts.force.contains(&n.name);
                 let bar = multi.insert_before(&overall, ProgressBar::new(0));
                 bar.set_style(stage_style.clone());
@@ -295,39 +358,19 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                     let _ = tx.send((n.name.clone(), s));
                 });
             }
-            if running.is_empty() {
+            if board.running.is_empty() {
                 break;
             }
             let (name, s) = rx.recv().expect("a worker reports before it exits");
-            running.remove(&name);
-            if let (Status::Computed { wall_s }, Some(n)) = (&s, graph.get(&name)) {
-                taken += wall_s;
-                estimated += estimates.seconds(n);
-            }
-            since.remove(&name);
+            let line = ended_line(&name, &s);
+            let eta = board.ended(&name, s, jobs);
             overall.inc(1);
-            status.insert(name.clone(), s.clone());
-            // Calibrated once a minute of estimated work has run: short stages say little.
-            let scale = if estimated > 60.0 { (taken / estimated).clamp(0.25, 4.0) } else { 1.0 };
-            let eta = format!("about {} left", minutes(left(&status, &since, scale)));
             overall.set_message(eta.clone());
-            // Finished stages leave one line above the bars (or in the log, without a
-            // terminal, with the bar's figures): what happened and how long it took.
-            let line = match &s {
-                Status::Failed { error, .. } => Some(format!("  failed    {name}: {error}")),
-                Status::Computed { wall_s } => Some(format!("  computed  {name} ({wall_s:.1} s)")),
-                Status::Cached => Some(format!("  reused    {name}")),
-                Status::Skipped { .. } => None,
-            };
+            // Without a terminal, the line goes to the log with the bar's figures.
             if let Some(line) = line.filter(|_| opts.progress) {
                 if multi.is_hidden() {
-                    let done = format!(
-                        "{}/{} stages, {} elapsed, {eta}",
-                        overall.position(),
-                        graph.nodes.len(),
-                        minutes(overall.elapsed().as_secs_f64())
-                    );
-                    eprintln!("{line}  [{done}]")
+                    let elapsed = minutes(overall.elapsed().as_secs_f64());
+                    eprintln!("{line}  [{}/{} stages, {elapsed} elapsed, {eta}]", overall.position(), graph.nodes.len());
                 } else {
                     multi.println(line).ok().unwrap_or(())
                 }
@@ -335,6 +378,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
         }
     });
     overall.finish_and_clear();
+    let Board { mut status, keys, .. } = board;
     Ok(graph
         .nodes
         .iter()

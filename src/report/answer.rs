@@ -147,6 +147,23 @@ pub fn markdown(
             .filter(|l| l.configurations > 1 || matches!(l.mark, Some(crate::store::TestSetMark::Reuse { .. })))
             .map_or(String::new(), |l| format!(" ({})", l.verdict()))
     };
+    let out = single_tables(protocols, aggregate, demos, &caveat, bc_warning)
+        + &replicated_studies(aggregate, improvement, demos, &caveat, bc_warning);
+    if out.is_empty() {
+        return out;
+    }
+    format!("## The answer\n\n{out}")
+}
+
+/// The answer for each single pipeline's table (a study without replicates): each method's
+/// final-policy return against BC and the demonstrations, over its RL runs.
+fn single_tables(
+    protocols: &[ProtocolRow],
+    aggregate: &[AggregateRow],
+    demos: &BTreeMap<(String, String), Vec<f64>>,
+    caveat: &dyn Fn(&str, &str) -> String,
+    bc_warning: f64,
+) -> String {
     let mut out = String::new();
     let replicated: std::collections::BTreeSet<(&str, &str)> = aggregate.iter().map(|a| (a.env.as_str(), a.study.as_str())).collect();
     // Single tables: (env, table) -> its final-policy rows.
@@ -202,7 +219,19 @@ pub fn markdown(
         ));
         out.push('\n');
     }
-    // Replicated studies: the mean over replicates, and replicate-by-replicate counts.
+    out
+}
+
+/// The answer for each replicated study: the mean over replicates, and replicate-by-replicate
+/// counts with the sign test.
+fn replicated_studies(
+    aggregate: &[AggregateRow],
+    improvement: &[ImprovementRow],
+    demos: &BTreeMap<(String, String), Vec<f64>>,
+    caveat: &dyn Fn(&str, &str) -> String,
+    bc_warning: f64,
+) -> String {
+    let mut out = String::new();
     let mut studies: BTreeMap<(&str, &str), Vec<&AggregateRow>> = BTreeMap::new();
     for a in aggregate.iter().filter(|a| a.protocol == Protocol::Final) {
         studies.entry((&a.env, &a.study)).or_default().push(a);
@@ -276,10 +305,7 @@ pub fn markdown(
         out.push_str(&verdicts(rows, improvement));
         out.push('\n');
     }
-    if out.is_empty() {
-        return out;
-    }
-    format!("## The answer\n\n{out}")
+    out
 }
 
 #[cfg(test)]

@@ -203,6 +203,20 @@ pub fn write(
     dir: &Path,
     formats: FigureFormats,
 ) -> Result<Vec<Written>> {
+    let groups = groups(store);
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let mut written = Vec::new();
+    let groups_demos: BTreeMap<(String, String), f64> = groups.iter().filter_map(|(k, g)| g.demos.map(|d| (k.clone(), d.0))).collect();
+    for ((env, pipeline), g) in groups {
+        table_figures(store, (&env, &pipeline), g, (protocols, clone_rows), (dir, formats), &mut written)?;
+    }
+    study_figures(protocols, aggregate, &groups_demos, (dir, formats), &mut written)?;
+    Ok(written)
+}
+
+/// Per (environment, table), what its figures draw, read from the evaluations and the
+/// rewards and ranked sets behind them.
+fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
     for m in store.iter() {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
@@ -244,54 +258,73 @@ pub fn write(
             }
         }
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let mut written = Vec::new();
-    let groups_demos: BTreeMap<(String, String), f64> = groups.iter().filter_map(|(k, g)| g.demos.map(|d| (k.clone(), d.0))).collect();
-    for ((env, pipeline), mut g) in groups {
-        let slug = format!("{}-{}", env.to_lowercase(), pipeline).replace(['/', ' ', '[', ']', ',', '='], "_");
-        let mut emit = |fig: &dyn Fn(&Path, &str) -> Result<String>, name: &str| -> Result<()> {
-            let stem = format!("{slug}-{name}");
-            let title = fig(dir, &stem)?;
-            written.push(Written { env: env.clone(), pipeline: pipeline.clone(), stem, title });
-            Ok(())
-        };
-        let curves: Vec<Curve> = g.sets.values().map(|(node, levels)| Curve { source: node.clone(), levels: levels.clone() }).collect();
-        if !curves.is_empty() {
-            let fig = Degradation { env: env.clone(), pipeline: pipeline.clone(), curves, demos: g.demos };
-            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "degradation")?;
-        }
-        for (method, reward) in &g.rewards {
-            let Some((_, Typed { metrics: Metrics::Trex(t), .. })) = typed(store, reward) else { continue };
-            let pairs = |truth: &[f64], pred: &[f64]| truth.iter().copied().zip(pred.iter().copied()).collect::<Vec<_>>();
-            let fig = RewardScatter {
-                env: env.clone(),
-                pipeline: pipeline.clone(),
-                method: *method,
-                sets: vec![
-                    ("training set", pairs(&t.train_set.scored.truth, &t.train_set.scored.predicted)),
-                    ("demonstrations", pairs(&t.demos.truth, &t.demos.predicted)),
-                    ("unseen evaluation rollouts", g.unseen.get(method).cloned().unwrap_or_default()),
-                ],
-            };
-            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), &format!("reward-{}", method.name()))?;
-        }
-        if !g.runs.is_empty() {
-            g.runs.sort_by_key(|r| (r.0, r.1));
-            let fig = PpoCurves { env: env.clone(), pipeline: pipeline.clone(), runs: std::mem::take(&mut g.runs), demos: g.demos };
-            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "ppo")?;
-        }
-        let rows: Vec<_> = clone_rows.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
-        if !rows.is_empty() {
-            let random = rows.iter().find_map(|r| store_random(store, &r.node));
-            let fig = clones::CloneScatter { env: env.clone(), pipeline: pipeline.clone(), rows, random };
-            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "clones")?;
-        }
-        let rows: Vec<ProtocolRow> = protocols.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
-        if !rows.is_empty() {
-            let fig = FinalBars { env: env.clone(), pipeline: pipeline.clone(), rows, demos: g.demos.map(|d| d.0) };
-            emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "final")?;
-        }
+    groups
+}
+
+/// The figures of one (environment, table): degradation, each reward's scatter, PPO's
+/// curves, the clones and the final bars.
+fn table_figures(
+    store: &Artifacts,
+    (env, pipeline): (&str, &str),
+    mut g: Group,
+    (protocols, clone_rows): (&[ProtocolRow], &[super::clones::CloneRow]),
+    (dir, formats): (&Path, FigureFormats),
+    written: &mut Vec<Written>,
+) -> Result<()> {
+    let slug = format!("{}-{}", env.to_lowercase(), pipeline).replace(['/', ' ', '[', ']', ',', '='], "_");
+    let mut emit = |fig: &dyn Fn(&Path, &str) -> Result<String>, name: &str| -> Result<()> {
+        let stem = format!("{slug}-{name}");
+        let title = fig(dir, &stem)?;
+        written.push(Written { env: env.to_string(), pipeline: pipeline.to_string(), stem, title });
+        Ok(())
+    };
+    let curves: Vec<Curve> = g.sets.values().map(|(node, levels)| Curve { source: node.clone(), levels: levels.clone() }).collect();
+    if !curves.is_empty() {
+        let fig = Degradation { env: env.to_string(), pipeline: pipeline.to_string(), curves, demos: g.demos };
+        emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "degradation")?;
     }
+    for (method, reward) in &g.rewards {
+        let Some((_, Typed { metrics: Metrics::Trex(t), .. })) = typed(store, reward) else { continue };
+        let pairs = |truth: &[f64], pred: &[f64]| truth.iter().copied().zip(pred.iter().copied()).collect::<Vec<_>>();
+        let fig = RewardScatter {
+            env: env.to_string(),
+            pipeline: pipeline.to_string(),
+            method: *method,
+            sets: vec![
+                ("training set", pairs(&t.train_set.scored.truth, &t.train_set.scored.predicted)),
+                ("demonstrations", pairs(&t.demos.truth, &t.demos.predicted)),
+                ("unseen evaluation rollouts", g.unseen.get(method).cloned().unwrap_or_default()),
+            ],
+        };
+        emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), &format!("reward-{}", method.name()))?;
+    }
+    if !g.runs.is_empty() {
+        g.runs.sort_by_key(|r| (r.0, r.1));
+        let fig = PpoCurves { env: env.to_string(), pipeline: pipeline.to_string(), runs: std::mem::take(&mut g.runs), demos: g.demos };
+        emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "ppo")?;
+    }
+    let rows: Vec<_> = clone_rows.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
+    if !rows.is_empty() {
+        let random = rows.iter().find_map(|r| store_random(store, &r.node));
+        let fig = clones::CloneScatter { env: env.to_string(), pipeline: pipeline.to_string(), rows, random };
+        emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "clones")?;
+    }
+    let rows: Vec<ProtocolRow> = protocols.iter().filter(|r| r.env == env && r.pipeline == pipeline).cloned().collect();
+    if !rows.is_empty() {
+        let fig = FinalBars { env: env.to_string(), pipeline: pipeline.to_string(), rows, demos: g.demos.map(|d| d.0) };
+        emit(&|d, s| save(&fig, d, s, formats).map(|_| fig.title()), "final")?;
+    }
+    Ok(())
+}
+
+/// Per (environment, study) with several replicates: the intervals and the profile.
+fn study_figures(
+    protocols: &[ProtocolRow],
+    aggregate: &[AggregateRow],
+    groups_demos: &BTreeMap<(String, String), f64>,
+    (dir, formats): (&Path, FigureFormats),
+    written: &mut Vec<Written>,
+) -> Result<()> {
     let mut studies: Vec<(&str, &str)> = aggregate.iter().map(|a| (a.env.as_str(), a.study.as_str())).collect();
     studies.dedup();
     for (env, study) in studies {
@@ -310,7 +343,7 @@ pub fn write(
         save(&fig, dir, &format!("{slug}-profile"), formats)?;
         written.push(Written { env: env.into(), pipeline: label, stem: format!("{slug}-profile"), title: fig.title() });
     }
-    Ok(written)
+    Ok(())
 }
 
 /// The markdown section linking every figure (the PNG with the SVG beside it, or the one

@@ -11,6 +11,7 @@ use crate::pipeline::stage::demos::DemosParams;
 use crate::pipeline::stage::eval::{EvalMetrics, EvalParams, RewardAccuracy};
 use crate::pipeline::stage::{Metrics, Params, RolloutSummary};
 use crate::stats::ReturnStats;
+use crate::stats::{pearson, spearman};
 
 fn manifest(key: &str, params: &Params, metrics: &Metrics, inputs: &[(&str, &str)]) -> Manifest {
     Manifest {

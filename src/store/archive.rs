@@ -62,7 +62,8 @@ pub fn write(path: &Path, manifests: &BTreeMap<String, String>) -> Result<()> {
 fn text_of(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     let bytes = if bytes.starts_with(&ZSTD_MAGIC) {
-        zstd::stream::decode_all(bytes.as_slice()).map_err(|e| Error::file(path, format!("a damaged zstd archive ({e}); restore it from git")))?
+        zstd::stream::decode_all(bytes.as_slice())
+            .map_err(|e| Error::file(path, format!("a damaged zstd archive ({e}); restore it from git")))?
     } else {
         bytes
     };
