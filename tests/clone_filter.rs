@@ -21,7 +21,7 @@ fn manifests(store: &Path) -> Vec<serde_json::Value> {
 /// The clones' groups in a rollout file of an artifact.
 fn groups(store: &Path, key: &str, file: &str) -> BTreeSet<usize> {
     let path = store.join(key).join(file);
-    let r = idrex::log::mcap::parse(&path, &std::fs::read(&path).unwrap()).unwrap();
+    let r = idrex::rollout::mcap::parse(&path, &std::fs::read(&path).unwrap()).unwrap();
     r.trajectories.iter().filter(|t| t.meta.source.starts_with("multi-bc/")).map(|t| t.meta.group).collect()
 }
 

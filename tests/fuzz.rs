@@ -8,7 +8,7 @@
 //! container into idrex's own checks. The suite runs a few thousand cases per loader; the soak
 //! (`cargo test --release --test tests fuzz::soak -- --ignored`) a million each. Inputs that
 //! once failed are kept by proptest in `tests/fuzz-regressions.txt` and replayed first; the
-//! MCAP reader's abort it found is also a unit test in `log/mcap.rs`.
+//! MCAP reader's abort it found is also a unit test in `rollout/mcap.rs`.
 use std::cell::Cell;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -371,7 +371,7 @@ fn fuzz_mcap(cases: u32) {
             // abort on allocation, which idrex's reader guards against).
             let deep = mcap::read::footer(&bytes).is_ok() && mcap::read::Summary::read(&bytes).is_ok_and(|s| s.is_some());
             let start = Instant::now();
-            let outcome = dog.watch((i, &e), || idrex::log::mcap::parse(&file, &bytes).map(|_| ()).map_err(|e| e.to_string()));
+            let outcome = dog.watch((i, &e), || idrex::rollout::mcap::parse(&file, &bytes).map(|_| ()).map_err(|e| e.to_string()));
             tally.count(outcome.is_ok(), deep);
             judge(&["/store/key/rollouts.mcap"], start, outcome)
         })

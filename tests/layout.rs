@@ -267,6 +267,16 @@ fn function_lengths(lines: &[&str]) -> Vec<(String, usize)> {
     out
 }
 
+/// One convention for module files: a module with submodules is a folder with `mod.rs`,
+/// never a `name.rs` beside a `name/` folder.
+#[test]
+fn a_module_with_submodules_is_a_folder_with_mod_rs() {
+    let mixed: Vec<String> =
+        modules().values().filter(|p| !p.ends_with("mod.rs") && p.with_extension("").is_dir()).map(|p| p.display().to_string()).collect();
+    assert!(mixed.is_empty(), "move each into its folder as mod.rs: {mixed:?}");
+    assert!(modules().values().filter(|p| p.ends_with("mod.rs")).count() > 10);
+}
+
 #[test]
 fn no_function_holds_over_100_lines() {
     let long: Vec<String> = modules()

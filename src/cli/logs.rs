@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Subcommand;
 
-use crate::log::export::{self, ExportFormat};
-use crate::log::mcap;
 use crate::log::table::{Cell, Table};
+use crate::rollout::export::{self, ExportFormat};
+use crate::rollout::mcap;
 
 #[derive(Debug, Subcommand)]
 pub enum LogsCommand {

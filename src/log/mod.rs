@@ -1,7 +1,6 @@
-//! What idrex writes for outside tools: trajectories as MCAP (the rollout artifacts
-//! themselves) and flat CSV/NDJSON exports of them, plots as Rerun recordings.
-pub mod export;
-pub mod mcap;
+//! What idrex writes for people and outside tools besides the rollouts (whose MCAP format
+//! lives with them, in [`crate::rollout`]): plots as Rerun recordings, progress, and the one
+//! writer of every table.
 pub mod progress;
 pub mod rerun;
 pub mod table;

@@ -189,7 +189,7 @@ pub fn learners(spec: &PipelineFile, settings: &[Setting], p: &mut Problems) {
             _ => {}
         }
     }
-    if spec.role == Role::Test && (!settings.is_empty() || spec.sweep.is_some()) {
+    if spec.role == Purpose::Test && (!settings.is_empty() || spec.sweep.is_some()) {
         p.bad(
             &["role"],
             "role: test locks its seeds to one configuration; run a sweep or -S settings on tuning seeds, \

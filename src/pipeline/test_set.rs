@@ -6,7 +6,7 @@
 //! used, unless the user asks for it, and then marks what it computes.
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::config::Role;
+use super::config::Purpose;
 use super::graph::Graph;
 use super::stage::{EvalInputs, Inputs, Params, StageKind};
 use super::{Method, Pipeline};
@@ -117,23 +117,23 @@ pub fn check(p: &Pipeline, g: &Graph, looks: &Looks, stored: &dyn Fn(&str) -> bo
     let file = p.file.display();
     let hint = "use seeds no one has evaluated on, or pass --reuse-test-set (the report then marks these results as exploratory)";
     match (p.spec.role, locked, others.first()) {
-        (Role::Test, _, Some(o)) if !reuse => Err(Error::Invalid(format!(
+        (Purpose::Test, _, Some(o)) if !reuse => Err(Error::Invalid(format!(
             "{file}: role: test, but seed {} of {} already holds an evaluation of another configuration (study `{}`); a test set \
              must be fresh: {hint}",
             o.seed,
             o.env.name(),
             o.study
         ))),
-        (Role::Test, _, Some(_)) => Ok(Some(TestSetMark::Reuse { study: p.name.clone() })),
-        (Role::Test, _, None) => Ok(Some(TestSetMark::Test { study: p.name.clone() })),
-        (Role::Study, Some((study, l)), _) if !reuse => Err(Error::Invalid(format!(
+        (Purpose::Test, _, Some(_)) => Ok(Some(TestSetMark::Reuse { study: p.name.clone() })),
+        (Purpose::Test, _, None) => Ok(Some(TestSetMark::Test { study: p.name.clone() })),
+        (Purpose::Study, Some((study, l)), _) if !reuse => Err(Error::Invalid(format!(
             "{file}: would evaluate a configuration on seed {} of {}, which belongs to the locked test set `{study}` (a file with \
              role: test): {hint}",
             l.seed,
             l.env.name()
         ))),
-        (Role::Study, Some((study, _)), _) => Ok(Some(TestSetMark::Reuse { study })),
-        (Role::Study, None, _) => Ok(None),
+        (Purpose::Study, Some((study, _)), _) => Ok(Some(TestSetMark::Reuse { study })),
+        (Purpose::Study, None, _) => Ok(None),
     }
 }
 

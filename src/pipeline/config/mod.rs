@@ -298,7 +298,7 @@ pub struct PipelineFile {
     /// configuration used) without `--reuse-test-set`, and the report marks results
     /// obtained that way. Not part of any key.
     #[serde(default)]
-    pub role: Role,
+    pub role: Purpose,
     /// The methods to run and report.
     #[serde(default = "default_methods")]
     pub methods: Vec<Method>,
@@ -344,7 +344,7 @@ pub struct PipelineFile {
 /// What a pipeline file is for ([`PipelineFile::role`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
-pub enum Role {
+pub enum Purpose {
     /// Tuning or exploration: its seeds may be reused.
     #[default]
     Study,

@@ -614,7 +614,7 @@ mod tests {
                 truncated: true,
                 meta: TrajMeta { source: "demo".into(), noise: 0.0, seed, group: 0 },
             };
-            crate::log::mcap::write(path, "Hopper-v5", 0.008, &[t], None).unwrap();
+            crate::rollout::mcap::write(path, "Hopper-v5", 0.008, &[t], None).unwrap();
         };
         let npz = dir.join("demos.mcap");
         write(&npz, 0);

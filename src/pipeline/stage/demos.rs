@@ -8,8 +8,8 @@ use crate::algo::ppo::{self, PpoConfig};
 use crate::data::{TrajMeta, Trajectory};
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
-use crate::log::mcap;
 use crate::pipeline::inputs::NoInputs;
+use crate::rollout::mcap;
 use crate::rollout::{self, Acting, PolicyActor};
 use crate::seed::Purpose;
 

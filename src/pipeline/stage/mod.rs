@@ -45,8 +45,8 @@ use super::role::Role;
 use crate::data::Trajectory;
 use crate::env::{Env, EnvId};
 use crate::error::{Error, Result};
-use crate::log::mcap;
 use crate::nn::{ActorCritic, Device};
+use crate::rollout::mcap;
 use crate::stats::ReturnStats;
 
 pub const ROLLOUTS: &str = "rollouts.mcap";

@@ -161,7 +161,7 @@ pub fn run(p: &Params, inputs: &MultiBcInputs<std::path::PathBuf>, ctx: &StageCt
         if keep { kept.extend(trajs) } else { extra.extend(trajs) }
     }
     ctx.write_rollouts(p.env, &kept, None)?;
-    crate::log::mcap::write(&ctx.out.join(CLONES), p.env.name(), env.dt(), &extra, None)?;
+    crate::rollout::mcap::write(&ctx.out.join(CLONES), p.env.name(), env.dt(), &extra, None)?;
     let baseline_set = baseline.filter(|_| p.filter != CloneFilter::None).map(|(i, _)| i);
     Ok(Metrics { random_return, baseline_set, clones, degradation: degradation(&kept) })
 }

@@ -1,8 +1,12 @@
-//! The one rollout loop shared by noise rollouts, demonstrations, evaluation and PPO's
+//! Rollouts: their file format ([`mcap`], and flat exports of it, [`export`]), and the one
+//! rollout loop shared by noise rollouts, demonstrations, evaluation and PPO's
 //! evaluations: any [`Actor`] in one environment, full episodes, actions clipped to the box
 //! before the step (Gymnasium's ClipAction, as CleanRL and SB3 use). The base actors live
 //! here too: a stored policy ([`PolicyActor`]) and uniform random actions; the noise that
 //! wraps them is in `algo::noise`, one layer up.
+pub mod export;
+pub mod mcap;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
