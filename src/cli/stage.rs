@@ -53,7 +53,7 @@ pub fn run(cmd: &StageCommand) -> anyhow::Result<()> {
     let node = Node { name: def.node.clone(), params, seed: def.seed, inputs };
     let body = |n: &Node, ctx: &stage::StageCtx| stage::run(&n.params, ctx).map(|m| m.to_json());
     let progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    match runner::run_one(&node, &args.key, def.inputs.clone(), &store, (threads, def.test_set.as_ref()), progress, &body) {
+    match runner::run_one(&node, &args.key, node.inputs.clone(), &store, (threads, def.test_set.as_ref()), progress, &body) {
         Status::Cached => println!("{} ({}): already stored in {}", def.node, &args.key[..12], store.location()),
         Status::Computed { wall_s } => {
             println!("{} ({}): computed in {wall_s:.1} s, published to {}", def.node, &args.key[..12], store.location())

@@ -60,7 +60,7 @@ pub type StageBody = dyn Fn(&Node, &StageCtx) -> Result<Value> + Sync;
 pub fn run_one(
     node: &Node,
     key: &str,
-    inputs: BTreeMap<String, String>,
+    inputs: Inputs<String>,
     store: &Store,
     (threads, test_set): (usize, Option<&TestSetMark>),
     progress: bool,
@@ -78,7 +78,7 @@ pub fn run_one(
 fn run_node(
     node: &Node,
     key: &str,
-    inputs: BTreeMap<String, String>,
+    inputs: Inputs<String>,
     store: &Store,
     (forced, mark): (bool, Option<&TestSetMark>),
     threads: usize,
@@ -99,7 +99,7 @@ fn run_node(
         // A forced node is computed to the side; the stored artifact stays until the new one
         // replaces it.
         // An S3 store's inputs are downloaded into its local cache (and checked) first.
-        let input_dirs = Inputs::from_recorded(node.kind(), &node.name, inputs.iter())?.try_map(|k| store.input_dir(k))?;
+        let input_dirs = inputs.try_map(|k| store.input_dir(k))?;
         let staging = store.stage(key)?;
         let started = now_unix();
         let clock = Instant::now();
@@ -125,7 +125,8 @@ fn run_node(
             node: node.name.clone(),
             params: node.params.to_json(),
             seed: node.seed,
-            inputs,
+            // The one place a stage's typed inputs become the names a manifest records.
+            inputs: inputs.iter().map(|(role, k)| (role.name(), k.clone())).collect(),
             outputs: vec![],
             metrics,
             started_unix: started,
@@ -345,7 +346,7 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
                 board.running.insert(n.name.clone(), threads);
                 board.since.insert(n.name.clone(), Instant::now());
                 let key = board.keys[&n.name].clone();
-                let inputs: BTreeMap<String, String> = n.inputs.iter().map(|(role, src)| (role.name(), board.keys[src].clone())).collect();
+                let inputs = n.inputs.map(|src| board.keys[src].clone());
                 let forced = opts.force.contains(&n.name);
                 let bar = multi.insert_before(&overall, ProgressBar::new(0));
                 bar.set_style(stage_style.clone());
