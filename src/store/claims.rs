@@ -26,26 +26,26 @@ impl Store {
     /// Records a node's definition next to the artifacts, for `idrex stage run KEY`.
     pub fn put_def(&self, def: &NodeDef) -> Result<()> {
         let text = serde_json::to_string_pretty(def).expect("a definition serialises") + "\n";
-        self.backend.put_def(self, &def.key, text)
+        self.backend.put_def(&self.local, &def.key, text)
     }
 
     /// Claims attempt `n` at computing `key` for `who` (a Slurm job id): create-if-absent,
     /// so of two submitters racing for one attempt exactly one wins.
     pub fn claim(&self, key: &str, n: u32, who: &str) -> Result<s3::Created> {
-        self.backend.claim(self, key, n, who)
+        self.backend.claim(&self.local, key, n, who)
     }
 
     /// The latest claim on `key`: (attempt, who).
     pub fn last_claim(&self, key: &str) -> Result<Option<(u32, String)>> {
-        let names = self.backend.claims(self, key)?;
+        let names = self.backend.claims(&self.local, key)?;
         let Some(n) = names.iter().filter_map(|n| n.parse::<u32>().ok()).max() else { return Ok(None) };
-        let who = self.backend.claim_holder(self, key, n)?;
+        let who = self.backend.claim_holder(&self.local, key, n)?;
         Ok(Some((n, String::from_utf8_lossy(&who).into_owned())))
     }
 
     pub fn get_def(&self, key: &str) -> Result<Option<NodeDef>> {
         self.backend
-            .get_def(self, key)?
+            .get_def(&self.local, key)?
             .map(|b| serde_json::from_slice(&b).map_err(|e| Error::Invalid(format!("{}: definition of {key}: {e}", self.location()))))
             .transpose()
     }

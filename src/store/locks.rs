@@ -16,7 +16,7 @@ pub struct UseLock {
     _file: File,
 }
 
-impl Store {
+impl LocalDir {
     /// Blocks until this process holds `key`'s lock; `waiting` is told who holds it first
     /// when someone does.
     pub fn lock(&self, key: &str) -> Result<KeyLock> {
@@ -56,5 +56,28 @@ impl Store {
             Error::Invalid(format!("a pipeline run is using the store {}; run gc again when it has finished", self.root.display()))
         })?;
         Ok(UseLock { _file: file })
+    }
+}
+
+impl Store {
+    /// Blocks until this process holds `key`'s lock.
+    pub fn lock(&self, key: &str) -> Result<KeyLock> {
+        self.local.lock(key)
+    }
+
+    /// Blocks until this process holds `key`'s lock; `waiting` is told who holds it first
+    /// when someone does.
+    pub fn lock_or_wait(&self, key: &str, waiting: &mut dyn FnMut(&str)) -> Result<KeyLock> {
+        self.local.lock_or_wait(key, waiting)
+    }
+
+    /// Marks the store as in use by a pipeline run (shared with other runs) until dropped.
+    pub fn in_use(&self) -> Result<UseLock> {
+        self.local.in_use()
+    }
+
+    /// The store to itself, for deleting: fails while a pipeline run uses it.
+    pub fn exclusive(&self) -> Result<UseLock> {
+        self.local.exclusive()
     }
 }

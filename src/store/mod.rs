@@ -50,9 +50,17 @@ pub use manifest::{MANIFEST, Manifest, OutputFile, TestSetMark, hash_outputs, ke
 #[derive(Debug, Clone)]
 pub struct Store {
     /// The store's directory; for an S3 store, the local cache it stages and reads through.
-    root: PathBuf,
+    local: LocalDir,
     /// Where published artifacts live: this directory, or a bucket.
     backend: Arc<dyn Backend>,
+}
+
+/// The directory a store stages, publishes and locks in, laid out as a local store: the
+/// store itself, or an S3 store's cache. What both backends build on; they never call back
+/// into [`Store`].
+#[derive(Debug, Clone)]
+pub(crate) struct LocalDir {
+    root: PathBuf,
 }
 
 /// A stage's output directory before publication, owned through a lock on `<dir>.lock`.
@@ -106,7 +114,7 @@ impl Store {
     /// A handle for reading only (plan, report, verify): creates nothing, so that looking at a
     /// store never leaves `.tmp` and `.locks` behind, or a store where there was none.
     pub fn at(root: impl Into<PathBuf>) -> Self {
-        Store { root: root.into(), backend: Arc::new(Local) }
+        Store { local: LocalDir { root: root.into() }, backend: Arc::new(Local) }
     }
 
     /// The store at `location`; `write` creates a local store's directory if needed. An S3
@@ -121,14 +129,14 @@ impl Store {
                 // here with one line instead of in the middle of a command.
                 remote.size("artifacts")?;
                 let cache = Store::open(Location::cache_dir(bucket, prefix))?;
-                Ok(Store { root: cache.root, backend: Arc::new(remote) })
+                Ok(Store { local: cache.local, backend: Arc::new(remote) })
             }
         }
     }
 
     /// The store's directory or URL, for messages.
     pub fn location(&self) -> String {
-        self.backend.location(self)
+        self.backend.location(&self.local)
     }
 
     /// Requests to the store retried by this process so far (an S3 store's; each is
@@ -155,41 +163,101 @@ impl Store {
             let d = root.join(sub);
             std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
         }
-        Ok(Store { root, backend: Arc::new(Local) })
+        Ok(Store { local: LocalDir { root }, backend: Arc::new(Local) })
     }
 
     pub fn root(&self) -> &Path {
-        &self.root
+        &self.local.root
     }
 
     pub fn dir(&self, key: &str) -> PathBuf {
-        self.root.join(key)
+        self.local.dir(key)
     }
 
     /// The manifest of `key` if it is published and intact. A corrupt local artifact is moved
     /// to `.corrupt/` (so that it is recomputed) and reported as absent.
     pub fn lookup(&self, key: &str) -> Result<Option<Manifest>> {
-        self.backend.lookup(self, key)
+        self.backend.lookup(&self.local, key)
     }
 
     /// Checks an artifact against its manifest; the error says what is wrong. (In an S3
     /// store: its manifest and that every blob exists with its size; the digests are checked
     /// when a blob is downloaded, and by [`Store::verify`].)
     pub fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
-        self.backend.check(self, key)
+        self.backend.check(&self.local, key)
     }
 
     /// An intact artifact's `manifest.json` as written (what [`archive`] keeps), checked; from
     /// an S3 store, through its cache.
     pub fn manifest_text(&self, key: &str) -> Result<String> {
         let dir = self.input_dir(key)?;
-        self.local_check(key).map_err(|p| Error::Invalid(format!("artifact {key} in {}: {p}", self.location())))?;
+        self.local.check(key).map_err(|p| Error::Invalid(format!("artifact {key} in {}: {p}", self.location())))?;
         let path = dir.join(MANIFEST);
         std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))
     }
 
+    /// A fresh, empty staging directory for `key`, owned until the [`Staging`] is dropped.
+    pub fn stage(&self, key: &str) -> Result<Staging> {
+        self.local.stage(key)
+    }
+
+    /// Removes staging directories nobody owns any more (their process died mid-stage).
+    pub fn clean_stale_staging(&self) {
+        self.local.clean_stale_staging()
+    }
+
+    /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place; with
+    /// `replace`, a stored artifact is exchanged for the new one atomically (readers see the
+    /// old or the new, never neither). The caller holds the key's lock.
+    pub fn publish(&self, staging: Staging, manifest: Manifest, replace: bool) -> Result<Manifest> {
+        let key = staging.key.clone();
+        let m = self.local.publish(staging, manifest, replace)?;
+        self.backend.published(&self.local, &key, replace)?;
+        Ok(m)
+    }
+
+    /// The local directory holding `key`'s outputs, for reading them: for an S3 store, the
+    /// artifact is downloaded into the cache first (each file checked against its digest)
+    /// unless the cache holds it intact.
+    pub fn input_dir(&self, key: &str) -> Result<PathBuf> {
+        self.backend.input_dir(&self.local, key)
+    }
+
+    /// Every published artifact's key (and anything else that sits where one would).
+    pub fn keys(&self) -> Result<Vec<String>> {
+        self.backend.keys(&self.local)
+    }
+
+    /// Every artifact's manifest as written, without re-hashing its outputs: for statistics
+    /// (stage-time estimates), never for trusting an artifact.
+    pub fn unverified_manifests(&self) -> Result<Vec<Manifest>> {
+        self.backend.unverified_manifests(&self.local)
+    }
+
+    /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
+    pub fn manifests(&self) -> Result<Vec<Manifest>> {
+        self.backend.manifests(&self.local)
+    }
+
+    /// Re-hashes every artifact; returns (key, problem) for each corrupt one.
+    pub fn verify(&self) -> Result<Vec<(String, String)>> {
+        self.backend.verify(&self.local)
+    }
+
+    /// Removes every artifact not in `keep`; returns what was (or, with `dry_run`, would be)
+    /// removed.
+    pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+        self.backend.gc(&self.local, keep, dry_run)
+    }
+}
+
+impl LocalDir {
+    pub(super) fn dir(&self, key: &str) -> PathBuf {
+        self.root.join(key)
+    }
+
     /// Checks the local directory's copy of `key` against its manifest.
-    pub(super) fn local_check(&self, key: &str) -> std::result::Result<Manifest, String> {
+    pub(super) fn check(&self, key: &str) -> std::result::Result<Manifest, String> {
         let dir = self.dir(key);
         let text = std::fs::read_to_string(dir.join(MANIFEST)).map_err(|e| format!("{MANIFEST}: {e}"))?;
         let m: Manifest = serde_json::from_str(&text).map_err(|e| format!("{MANIFEST}: {e}"))?;
@@ -213,7 +281,7 @@ impl Store {
     }
 
     /// A fresh, empty staging directory for `key`, owned until the [`Staging`] is dropped.
-    pub fn stage(&self, key: &str) -> Result<Staging> {
+    pub(super) fn stage(&self, key: &str) -> Result<Staging> {
         let n = STAGING_COUNTER.fetch_add(1, Ordering::Relaxed);
         let tmp = self.root.join(".tmp");
         std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
@@ -228,7 +296,7 @@ impl Store {
 
     /// Removes staging directories nobody owns any more (their process died mid-stage). A
     /// live run's staging is locked and stays, whatever process or namespace owns it.
-    pub fn clean_stale_staging(&self) {
+    pub(super) fn clean_stale_staging(&self) {
         let tmp = self.root.join(".tmp");
         let Ok(entries) = std::fs::read_dir(&tmp) else { return };
         for e in entries.flatten() {
@@ -245,24 +313,8 @@ impl Store {
         }
     }
 
-    /// Hashes the staged outputs, writes the manifest, fsyncs and renames into place; with
-    /// `replace`, a stored artifact is exchanged for the new one atomically (readers see the
-    /// old or the new, never neither). The caller holds the key's lock.
-    pub fn publish(&self, staging: Staging, manifest: Manifest, replace: bool) -> Result<Manifest> {
-        let key = staging.key.clone();
-        let m = self.local_publish(staging, manifest, replace)?;
-        self.backend.published(self, &key, replace)?;
-        Ok(m)
-    }
-
-    /// The local directory holding `key`'s outputs, for reading them: for an S3 store, the
-    /// artifact is downloaded into the cache first (each file checked against its digest)
-    /// unless the cache holds it intact.
-    pub fn input_dir(&self, key: &str) -> Result<PathBuf> {
-        self.backend.input_dir(self, key)
-    }
-
-    pub(super) fn local_publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
+    /// Publishes staged outputs into this directory (see [`Store::publish`]).
+    pub(super) fn publish(&self, staging: Staging, mut manifest: Manifest, replace: bool) -> Result<Manifest> {
         manifest.key = staging.key.clone();
         manifest.outputs = hash_outputs(&staging.dir)?;
         for o in &manifest.outputs {
@@ -287,33 +339,6 @@ impl Store {
         }
         // Else published by someone else meanwhile (only possible without the lock): keep theirs.
         Ok(manifest)
-    }
-
-    /// Every published artifact's key (and anything else that sits where one would).
-    pub fn keys(&self) -> Result<Vec<String>> {
-        self.backend.keys(self)
-    }
-
-    /// Every artifact's manifest as written, without re-hashing its outputs: for statistics
-    /// (stage-time estimates), never for trusting an artifact.
-    pub fn unverified_manifests(&self) -> Result<Vec<Manifest>> {
-        self.backend.unverified_manifests(self)
-    }
-
-    /// Every intact artifact's manifest (corrupt ones are skipped, not moved).
-    pub fn manifests(&self) -> Result<Vec<Manifest>> {
-        self.backend.manifests(self)
-    }
-
-    /// Re-hashes every artifact; returns (key, problem) for each corrupt one.
-    pub fn verify(&self) -> Result<Vec<(String, String)>> {
-        self.backend.verify(self)
-    }
-
-    /// Removes every artifact not in `keep`; returns what was (or, with `dry_run`, would be)
-    /// removed.
-    pub fn gc(&self, keep: &std::collections::BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
-        self.backend.gc(self, keep, dry_run)
     }
 }
 

@@ -6,11 +6,11 @@ use std::path::PathBuf;
 
 use super::backend::Backend;
 use super::s3::{Created, Remote};
-use super::{Manifest, Store, now_unix};
+use super::{LocalDir, Manifest, now_unix};
 use crate::error::{Error, Result};
 
 impl Backend for Remote {
-    fn location(&self, _: &Store) -> String {
+    fn location(&self, _: &LocalDir) -> String {
         self.url.clone()
     }
 
@@ -26,7 +26,7 @@ impl Backend for Remote {
         self.retries.count()
     }
 
-    fn lookup(&self, _: &Store, key: &str) -> Result<Option<Manifest>> {
+    fn lookup(&self, _: &LocalDir, key: &str) -> Result<Option<Manifest>> {
         Ok(match Remote::check(self, key)? {
             Some(Ok(m)) => Some(m),
             Some(Err(problem)) => {
@@ -39,18 +39,18 @@ impl Backend for Remote {
 
     /// Its manifest, and that every blob exists with its size; the digests are checked when
     /// a blob is downloaded, and by `verify`.
-    fn check(&self, _: &Store, key: &str) -> std::result::Result<Manifest, String> {
+    fn check(&self, _: &LocalDir, key: &str) -> std::result::Result<Manifest, String> {
         Remote::check(self, key).map_err(|e| e.to_string())?.unwrap_or_else(|| Err("not stored".into()))
     }
 
-    fn published(&self, store: &Store, key: &str, replace: bool) -> Result<()> {
+    fn published(&self, local: &LocalDir, key: &str, replace: bool) -> Result<()> {
         // Publish what the cache holds under the key (a copy left by an earlier push that
         // failed has the same bytes: outputs depend on the key alone).
-        let dir = store.dir(key);
-        let local = store.local_check(key).map_err(|p| Error::Invalid(format!("cached artifact {key}: {p}")))?;
-        if self.push(&dir, &local, replace)? == Created::AlreadyThere {
+        let dir = local.dir(key);
+        let ours = local.check(key).map_err(|p| Error::Invalid(format!("cached artifact {key}: {p}")))?;
+        if self.push(&dir, &ours, replace)? == Created::AlreadyThere {
             match Remote::check(self, key)? {
-                Some(Ok(theirs)) if theirs.outputs == local.outputs => {
+                Some(Ok(theirs)) if theirs.outputs == ours.outputs => {
                     tracing::info!("{key} was published to {} by another run first; keeping theirs", self.url)
                 }
                 Some(Ok(_)) => {
@@ -60,11 +60,11 @@ impl Backend for Remote {
                         "{key} was published to {} by another run with different bytes (outputs that do not depend on the key alone); keeping theirs",
                         self.url
                     );
-                    store.quarantine(key)?;
+                    local.quarantine(key)?;
                 }
                 // A manifest whose blobs are gone: ours replaces it.
                 _ => {
-                    self.push(&dir, &local, true)?;
+                    self.push(&dir, &ours, true)?;
                 }
             }
         }
@@ -72,17 +72,17 @@ impl Backend for Remote {
     }
 
     /// The artifact is downloaded into the cache first unless the cache holds it intact.
-    fn input_dir(&self, store: &Store, key: &str) -> Result<PathBuf> {
-        let dir = store.dir(key);
-        if store.local_check(key).is_ok() {
+    fn input_dir(&self, local: &LocalDir, key: &str) -> Result<PathBuf> {
+        let dir = local.dir(key);
+        if local.check(key).is_ok() {
             return Ok(dir);
         }
-        let _lock = store.lock(key)?;
-        if store.local_check(key).is_ok() {
+        let _lock = local.lock(key)?;
+        if local.check(key).is_ok() {
             return Ok(dir);
         }
         if dir.exists() {
-            store.quarantine(key)?;
+            local.quarantine(key)?;
         }
         let m = match Remote::check(self, key)? {
             Some(Ok(m)) => m,
@@ -91,21 +91,21 @@ impl Backend for Remote {
         };
         // The staging directory starts empty and `download` writes exactly the manifest's
         // files, each checked against its digest, before anything is published.
-        let staging = store.stage(key)?;
+        let staging = local.stage(key)?;
         self.download(&m, &staging.dir)?;
-        store.local_publish(staging, m, false)?;
+        local.publish(staging, m, false)?;
         Ok(dir)
     }
 
-    fn keys(&self, _: &Store) -> Result<Vec<String>> {
+    fn keys(&self, _: &LocalDir) -> Result<Vec<String>> {
         Remote::keys(self)
     }
 
-    fn unverified_manifests(&self, _: &Store) -> Result<Vec<Manifest>> {
+    fn unverified_manifests(&self, _: &LocalDir) -> Result<Vec<Manifest>> {
         Ok(Remote::keys(self)?.iter().filter_map(|k| self.manifest(k).ok().flatten()).collect())
     }
 
-    fn manifests(&self, _: &Store) -> Result<Vec<Manifest>> {
+    fn manifests(&self, _: &LocalDir) -> Result<Vec<Manifest>> {
         // A store that cannot be asked is an error, not an empty table.
         self.index_blobs()?;
         let mut out = Vec::new();
@@ -118,7 +118,7 @@ impl Backend for Remote {
     }
 
     /// Every blob downloaded and hashed: what a reader would get.
-    fn verify(&self, _: &Store) -> Result<Vec<(String, String)>> {
+    fn verify(&self, _: &LocalDir) -> Result<Vec<(String, String)>> {
         let mut bad = Vec::new();
         for k in crate::log::progress::counted(Remote::keys(self)?, "artifacts downloaded and re-hashed") {
             match Remote::check(self, &k)? {
@@ -140,14 +140,14 @@ impl Backend for Remote {
     /// Manifests first, then the blobs no remaining manifest names. A blob younger than an
     /// hour stays: it may belong to an upload whose manifest is not committed yet (there is
     /// no lock across machines, so gc cannot see a run elsewhere).
-    fn gc(&self, store: &Store, keep: &BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
+    fn gc(&self, local: &LocalDir, keep: &BTreeSet<String>, dry_run: bool) -> Result<Vec<String>> {
         let keys = Remote::keys(self)?;
         let removed: Vec<String> = keys.iter().filter(|k| !keep.contains(*k)).cloned().collect();
         if dry_run {
             return Ok(removed);
         }
         // Runs on this machine, at least, are seen (through the cache's use lock).
-        let _alone = store.exclusive()?;
+        let _alone = local.exclusive()?;
         for k in &removed {
             self.delete_artifact(k)?;
         }
@@ -172,24 +172,24 @@ impl Backend for Remote {
         Ok(removed)
     }
 
-    fn put_def(&self, _: &Store, key: &str, text: String) -> Result<()> {
+    fn put_def(&self, _: &LocalDir, key: &str, text: String) -> Result<()> {
         self.create(&format!("defs/{key}.json"), text.into_bytes())?;
         Ok(())
     }
 
-    fn get_def(&self, _: &Store, key: &str) -> Result<Option<Vec<u8>>> {
+    fn get_def(&self, _: &LocalDir, key: &str) -> Result<Option<Vec<u8>>> {
         self.get(&format!("defs/{key}.json"))
     }
 
-    fn claim(&self, _: &Store, key: &str, n: u32, who: &str) -> Result<Created> {
+    fn claim(&self, _: &LocalDir, key: &str, n: u32, who: &str) -> Result<Created> {
         self.create(&format!("claims/{key}/{n}"), who.as_bytes().to_vec())
     }
 
-    fn claims(&self, _: &Store, key: &str) -> Result<Vec<String>> {
+    fn claims(&self, _: &LocalDir, key: &str) -> Result<Vec<String>> {
         Ok(self.list(&format!("claims/{key}"))?.into_iter().map(|(n, _, _)| n).collect())
     }
 
-    fn claim_holder(&self, _: &Store, key: &str, n: u32) -> Result<Vec<u8>> {
+    fn claim_holder(&self, _: &LocalDir, key: &str, n: u32) -> Result<Vec<u8>> {
         Ok(self.get(&format!("claims/{key}/{n}"))?.unwrap_or_default())
     }
 }
