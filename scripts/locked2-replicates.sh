@@ -11,17 +11,8 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 [ $# -gt 0 ] || { echo "usage: $0 R [R...] (replicates of analysis/results/locked2/*.yaml, 0-9)" >&2; exit 2; }
-frozen_commit=10fbc61
 ./scripts/bootstrap.sh
-cache="${IDREX_CACHE:-${XDG_CACHE_HOME:-$HOME/.cache}/idrex}"
-frozen="$cache/idrex-$frozen_commit"
-if [ ! -x "$frozen" ]; then
-  src="$cache/locked-src-$frozen_commit"
-  [ -d "$src" ] || git worktree add --detach "$src" "$frozen_commit"
-  (cd "$src" && ./scripts/bootstrap.sh && cargo build --release --quiet --bin idrex)
-  target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' "$src/.cargo/config.toml")"
-  cp "$target/release/idrex" "$frozen.partial" && mv "$frozen.partial" "$frozen"
-fi
+frozen="$(./scripts/frozen-idrex.sh 10fbc61)"
 set2=analysis/results/locked2
 for r in "$@"; do
   out="$set2/report/r$r"
