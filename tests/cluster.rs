@@ -520,16 +520,9 @@ fn s3_refusals(base: &Path) {
         version: 1,
         node: "refusal".into(),
         params: serde_json::json!({}),
-        seed: 0,
-        inputs: BTreeMap::new(),
-        outputs: Vec::new(),
         metrics: serde_json::json!({}),
-        started_unix: 0.0,
-        ended_unix: 0.0,
-        wall_s: 0.0,
         idrex_version: "test".into(),
-        kernel: None,
-        test_set: None,
+        ..Default::default()
     };
     let publish = |store: &Store, bytes: &str| {
         let _lock = store.lock(&key).unwrap();

@@ -33,14 +33,12 @@ fn manifest(
         params,
         seed,
         inputs: inputs.iter().map(|(r, k)| (r.name(), k.to_string())).collect(),
-        outputs: vec![],
         metrics,
         started_unix: 1_796_300_000.0,
         ended_unix: 1_796_300_000.0 + seed as f64,
         wall_s: 1.0,
         idrex_version: env!("CARGO_PKG_VERSION").into(),
-        kernel: None,
-        test_set: None,
+        ..Default::default()
     }
 }
 

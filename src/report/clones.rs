@@ -47,10 +47,9 @@ pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
         if p.method != Method::IdrexMultiBc {
             continue;
         }
-        let Some(rm) = m.inputs.get(&Role::Reward.name()).and_then(|k| store.get(k)) else { continue };
-        for (role, key) in &rm.inputs {
-            let Some(sm) = store.get(key) else { continue };
-            if !Role::named_in(role, Series::Set) || !seen.insert((p.table(), key.clone())) {
+        let Some(rm) = store.input(m, Role::Reward) else { continue };
+        for (key, sm) in store.inputs_in(rm, Series::Set) {
+            if !seen.insert((p.table(), key.clone())) {
                 continue;
             }
             let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm) else { continue };

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use polars::prelude::*;
 
 use super::protocols::RunEval;
-use super::{Artifacts, TableId, method_label, over_checkpoints, pe, terms};
+use super::{Artifacts, TableId, input_key, method_label, over_checkpoints, pe, terms};
 use crate::error::{Error, Result};
 use crate::pipeline::role::Role;
 use crate::pipeline::stage::eval::{EvalMetrics, EvalParams};
@@ -129,8 +129,8 @@ impl Gathered {
         let run = RunEval { run: p.run, final_returns: x.summary.returns.clone(), checkpoints: x.checkpoints.clone() };
         self.runs.entry((env.clone(), table.clone(), method.clone())).or_default().push(run);
         if let Some(acc) = &x.reward {
-            let reward = m.inputs.get(&Role::Reward.name()).cloned().unwrap_or_default();
-            let ppo = m.inputs.get(&Role::Policy.name()).and_then(|k| store.get(k)).and_then(|pm| Typed::of(pm).ok());
+            let reward = input_key(m, Role::Reward).cloned().unwrap_or_default();
+            let ppo = store.input(m, Role::Policy).and_then(|pm| Typed::of(pm).ok());
             self.accuracy.push(AccuracyRunRow {
                 env: env.clone(),
                 table: table.label.clone(),
@@ -148,7 +148,7 @@ impl Gathered {
             });
         }
         // The demonstrations this evaluation was compared with (once per demos artifact).
-        if let Some(dk) = m.inputs.get(&Role::Demos.name())
+        if let Some(dk) = input_key(m, Role::Demos)
             && self.demo_keys.insert((env.clone(), table.label.clone(), dk.clone()))
             && let Some(dm) = store.get(dk)
             && let Ok(Typed { params, metrics: Metrics::Demos(d) | Metrics::DemosImport(d) }) = Typed::of(dm)

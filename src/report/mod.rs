@@ -29,6 +29,7 @@ use polars::prelude::*;
 use crate::error::{Error, Result};
 use crate::log::table::Table;
 use crate::pipeline::Method;
+use crate::pipeline::role::{Role, Series};
 use crate::store::{Manifest, Store};
 
 pub use crate::algo::scoring::{Selection, select};
@@ -100,6 +101,22 @@ impl Artifacts {
     pub fn get(&self, key: &str) -> Option<&Manifest> {
         self.by_key.get(key)
     }
+
+    /// `m`'s input in `role` (an evaluation's reward, policy or demonstrations), if known here.
+    pub fn input(&self, m: &Manifest, role: Role) -> Option<&Manifest> {
+        input_key(m, role).and_then(|k| self.get(k))
+    }
+
+    /// `m`'s inputs in `series` that are known here, with their keys (a reward's ranked sets).
+    pub fn inputs_in<'a>(&'a self, m: &'a Manifest, series: Series) -> impl Iterator<Item = (&'a String, &'a Manifest)> + 'a {
+        m.inputs.iter().filter(move |(name, _)| Role::named_in(name, series)).filter_map(|(_, k)| Some((k, self.get(k)?)))
+    }
+}
+
+/// The key of `m`'s input in `role`: the report's one reading of a manifest's recorded role
+/// names (lineage queries on [`Artifacts`] go through it).
+pub fn input_key(m: &Manifest, role: Role) -> Option<&String> {
+    m.inputs.get(&role.name())
 }
 
 /// The report's typed rows, every table of it (CSV, markdown, HTML and figures read these).

@@ -15,7 +15,7 @@ pub fn notes(store: &Artifacts) -> Result<String> {
     let mut seen = std::collections::BTreeSet::new();
     for m in store.iter() {
         let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
-        let Some(reward) = m.inputs.get(&Role::Reward.name()) else { continue };
+        let Some(reward) = super::input_key(m, Role::Reward) else { continue };
         if !seen.insert((p.pipeline.clone(), reward.clone())) {
             continue;
         }
@@ -30,10 +30,8 @@ pub fn notes(store: &Artifacts) -> Result<String> {
                 t.train_set.pearson
             ));
         }
-        for (role, key) in &rm.inputs {
-            if let (true, Some(sm)) = (Role::named_in(role, Series::Set), store.get(key))
-                && let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm)
-            {
+        for (_, sm) in store.inputs_in(rm, Series::Set) {
+            if let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm) {
                 let kept = x.kept();
                 let measured: Vec<String> = x
                     .clones

@@ -100,7 +100,7 @@ pub fn rows(arts: &Artifacts, store: Option<&Store>) -> Vec<TermRow> {
         let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
         // The demonstrations the table compares with, once per table: idrex's own only (an
         // imported file's terms are not known).
-        if let Some(dk) = m.inputs.get(&Role::Demos.name())
+        if let Some(dk) = super::input_key(m, Role::Demos)
             && demos_seen.insert((p.table(), dk.clone()))
             && let Some(dm) = arts.get(dk)
             && let Ok(Typed { metrics: Metrics::Demos(d), .. }) = Typed::of(dm)
@@ -170,7 +170,7 @@ fn ranked_of(arts: &Artifacts, store: Option<&Store>, key: &str) -> Option<(f64,
     let store = store.filter(|_| !arts.is_archived(key))?;
     let load = || -> crate::error::Result<(f64, f64)> {
         let model = RewardEnsemble::load(&store.input_dir(key)?.join(REWARD))?;
-        let set = m.inputs.get(&Series::Set.at(0).name()).ok_or_else(|| crate::error::Error::Invalid("no ranked set".into()))?;
+        let set = super::input_key(m, Series::Set.at(0)).ok_or_else(|| crate::error::Error::Invalid("no ranked set".into()))?;
         Ok(ranked_levels(&model, &read_rollouts(&store.input_dir(set)?)?))
     };
     load().map_err(|e| tracing::warn!("terms: the reward {}: {e}", &key[..12])).ok()
@@ -203,7 +203,7 @@ fn row(env: EnvId, pipeline: String, method: String, s: &Sums) -> TermRow {
 
 /// The reward an evaluation scored its episodes with (the T-REX artifact's key).
 fn reward_of(m: &Manifest) -> Option<&String> {
-    m.inputs.get(&Role::Reward.name())
+    super::input_key(m, Role::Reward)
 }
 
 /// Per (T-REX artifact, table): Pearson correlation of its predicted with the true return over

@@ -20,16 +20,12 @@ fn manifest(key: &str, params: &Params, metrics: &Metrics, inputs: &[(&str, &str
         version: params.kind().version(),
         node: key.into(),
         params: params.to_json(),
-        seed: 0,
         inputs: inputs.iter().map(|(r, k)| (r.to_string(), k.to_string())).collect(),
-        outputs: vec![],
         metrics: metrics.to_json(),
-        started_unix: 0.0,
         ended_unix: 1.0,
         wall_s: 1.0,
         idrex_version: "test".into(),
-        kernel: None,
-        test_set: None,
+        ..Default::default()
     }
 }
 

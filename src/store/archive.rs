@@ -194,12 +194,10 @@ mod tests {
             inputs,
             outputs: vec![OutputFile { path: "rollouts.mcap".into(), sha256: digest.into(), size: 3 }],
             metrics: serde_json::json!({"summary": {"returns": [1.5]}}),
-            started_unix: 0.0,
             ended_unix: 1.0,
             wall_s: 1.0,
             idrex_version: "test".into(),
-            kernel: None,
-            test_set: None,
+            ..Default::default()
         }
     }
 

@@ -17,7 +17,7 @@ pub struct OutputFile {
     pub size: u64,
 }
 
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Manifest {
     pub key: String,
     pub kind: String,

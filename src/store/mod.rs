@@ -350,21 +350,13 @@ mod tests {
 
     fn manifest(kind: &str) -> Manifest {
         Manifest {
-            key: String::new(),
             kind: kind.into(),
             version: 1,
             node: "n".into(),
             params: serde_json::json!({}),
-            seed: 0,
-            inputs: BTreeMap::new(),
-            outputs: vec![],
             metrics: serde_json::json!({}),
-            started_unix: 0.0,
-            ended_unix: 0.0,
-            wall_s: 0.0,
             idrex_version: "test".into(),
-            kernel: None,
-            test_set: None,
+            ..Default::default()
         }
     }
 

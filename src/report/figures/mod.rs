@@ -226,7 +226,7 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         if g.demos.is_none()
             && let Some((_, Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. })) =
-                m.inputs.get(&Role::Demos.name()).and_then(|k| typed(store, k))
+                super::input_key(m, Role::Demos).and_then(|k| typed(store, k))
         {
             g.demos = Some((d.stats.mean, d.stats.std));
         }
@@ -238,7 +238,7 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
                 .collect();
             g.runs.push((p.method, p.run, points));
         }
-        let Some(reward) = m.inputs.get(&Role::Reward.name()) else { continue };
+        let Some(reward) = super::input_key(m, Role::Reward) else { continue };
         if let Some(acc) = &x.reward {
             g.unseen.entry(p.method).or_default().extend(x.summary.returns.iter().copied().zip(acc.predicted_returns.iter().copied()));
         }
@@ -246,11 +246,10 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
             continue;
         }
         g.rewards.insert(p.method, reward.clone());
-        if let Some((rm, _)) = typed(store, reward) {
-            for (role, key) in &rm.inputs {
-                if Role::named_in(role, Series::Set)
-                    && !g.sets.contains_key(key)
-                    && let Some((sm, st)) = typed(store, key)
+        if let Some(rm) = store.get(reward) {
+            for (key, sm) in store.inputs_in(rm, Series::Set) {
+                if !g.sets.contains_key(key)
+                    && let Ok(st) = Typed::of(sm)
                     && let Some(levels) = degradation_of(&st.metrics)
                 {
                     g.sets.insert(key.clone(), (sm.node.clone(), levels));
