@@ -744,6 +744,32 @@ print("ok")
     assert_eq!(py(check, &[agg.to_str().unwrap(), imp.to_str().unwrap()]).trim(), "ok");
     assert!(report.join("figures/hopper-v5-study-study-intervals.png").exists());
     assert!(report.join("figures/hopper-v5-study-study-profile.png").exists());
+    // Replicate 0's figures and the study's only: no file and no link for replicates 1 and 2.
+    let first = dir.join("first");
+    let rep = idrex(&[
+        "report",
+        "--store",
+        store.to_str().unwrap(),
+        "--out",
+        first.to_str().unwrap(),
+        "--figures",
+        "svg",
+        "--replicate-figures",
+        "first",
+    ]);
+    assert!(rep.status.success(), "{}", stderr(&rep));
+    let figures = |d: &Path| -> Vec<String> {
+        let mut f: Vec<String> =
+            std::fs::read_dir(d.join("figures")).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into()).collect();
+        f.sort();
+        f
+    };
+    let (all, kept) = (figures(&report), figures(&first));
+    assert!(all.iter().any(|f| f.contains("study_r1-")) && all.iter().any(|f| f.contains("study_r2-")), "{all:?}");
+    assert!(kept.iter().all(|f| !f.contains("_r1-") && !f.contains("_r2-")), "{kept:?}");
+    assert!(kept.iter().any(|f| f == "hopper-v5-study-final.svg") && kept.iter().any(|f| f.ends_with("study-intervals.svg")), "{kept:?}");
+    let md = std::fs::read_to_string(first.join("report.md")).unwrap();
+    assert!(!md.contains("_r1-") && md.contains("figures/hopper-v5-study-final.svg"), "{md}");
 
     // Replicate 1 again, with other seeds: two artifacts claim its runs.
     let out = run(&file("c.yaml", "first_replicate: 1", "[5, 6]"));

@@ -33,6 +33,10 @@ pub struct ReportArgs {
     /// The figures' files (`svg` for what is committed: half the size, and it scales).
     #[arg(long, value_enum, default_value_t = crate::report::figures::FigureFormats::Both)]
     pub figures: crate::report::figures::FigureFormats,
+    /// Which replicates' tables get their own figures (`first` for a committed report of
+    /// many replicates; the study's intervals and profile are always drawn).
+    #[arg(long, value_enum, default_value_t = crate::report::figures::ReplicateFigures::All)]
+    pub replicate_figures: crate::report::figures::ReplicateFigures,
     /// An archive of a study's manifests (`idrex export`) to report with the store's results
     /// (repeatable); with archives only, the store may be absent.
     #[arg(long, value_name = "FILE.ndjson")]
@@ -104,7 +108,14 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         let path = args.out.join(format!("{stem}.{ext}"));
         std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
     }
-    let figures = crate::report::figures::write(&store, &t.protocols, &t.aggregate, &t.clones, &args.out.join("figures"), args.figures)?;
+    let figures = crate::report::figures::write(
+        &store,
+        &t.protocols,
+        &t.aggregate,
+        &t.clones,
+        &args.out.join("figures"),
+        (args.figures, args.replicate_figures),
+    )?;
     let notes = crate::report::notes(&store)?;
     drop(building);
     let md = format!(

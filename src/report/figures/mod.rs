@@ -54,6 +54,18 @@ impl FigureFormats {
     }
 }
 
+/// Which tables of a replicated study get their own figures (the study's intervals and
+/// profile are always drawn).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ReplicateFigures {
+    /// Every replicate's table.
+    #[default]
+    All,
+    /// Replicate 0's table only: a report over many replicates stays readable and small,
+    /// and the rest is rebuilt from the same store or archives with `all`.
+    First,
+}
+
 /// A figure written as `<stem>.svg` and/or `<stem>.png`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Written {
@@ -170,6 +182,8 @@ struct Group {
     /// Method -> unseen evaluation (true, predicted) pairs.
     unseen: BTreeMap<Method, Vec<(f64, f64)>>,
     runs: Runs,
+    /// The replicate of the table's evaluations.
+    replicate: usize,
 }
 
 fn typed<'a>(store: &'a Artifacts, key: &str) -> Option<(&'a Manifest, Typed)> {
@@ -201,9 +215,12 @@ pub fn write(
     aggregate: &[AggregateRow],
     clone_rows: &[super::clones::CloneRow],
     dir: &Path,
-    formats: FigureFormats,
+    (formats, replicates): (FigureFormats, ReplicateFigures),
 ) -> Result<Vec<Written>> {
-    let groups = groups(store);
+    let mut groups = groups(store);
+    if replicates == ReplicateFigures::First {
+        groups.retain(|_, g| g.replicate == 0);
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let mut written = Vec::new();
     let groups_demos: BTreeMap<(String, String), f64> = groups.iter().filter_map(|(k, g)| g.demos.map(|d| (k.clone(), d.0))).collect();
@@ -224,6 +241,7 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
         }
         let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
+        g.replicate = p.replicate;
         if g.demos.is_none()
             && let Some((_, Typed { metrics: Metrics::Demos(d) | Metrics::DemosImport(d), .. })) =
                 super::input_key(m, Role::Demos).and_then(|k| typed(store, k))
