@@ -155,6 +155,23 @@ pub fn sign_test_p(wins: usize, n: usize) -> f64 {
     if n == 0 { f64::NAN } else { binomial_upper_tail(wins, n, 0.5) }
 }
 
+/// Holm's step-down correction of a family of p-values (Holm 1979), in the family's order:
+/// the i-th smallest p is multiplied by m - i + 1 (i from 1), made no smaller than the one
+/// before it, and capped at 1. A question of the family is decided where its corrected p is
+/// below the level; NaN (a question not measured) stays NaN and leaves the family.
+pub fn holm(ps: &[f64]) -> Vec<f64> {
+    let mut order: Vec<usize> = (0..ps.len()).filter(|&i| ps[i].is_finite()).collect();
+    order.sort_by(|&a, &b| ps[a].total_cmp(&ps[b]));
+    let m = order.len();
+    let mut out = vec![f64::NAN; ps.len()];
+    let mut floor = 0.0_f64;
+    for (i, &at) in order.iter().enumerate() {
+        floor = floor.max(((m - i) as f64 * ps[at]).min(1.0));
+        out[at] = floor;
+    }
+    out
+}
+
 /// The lower end of the two-sided 95 % Clopper-Pearson interval of a win rate seen as `wins`
 /// of `n`: the p at which P(X >= wins) = 2.5 % (0 when `wins` is 0). 5 of 5 gives 0.478.
 pub fn clopper_pearson_lower(wins: usize, n: usize) -> f64 {
@@ -361,6 +378,22 @@ pub mod nan_as_null {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn holm_steps_down_and_keeps_the_order() {
+        // Sorted 0.005, 0.01, 0.03, 0.04: x4 = 0.02, x3 = 0.03, x2 = 0.06, x1 = 0.04 -> 0.06.
+        let got = holm(&[0.01, 0.04, 0.03, 0.005]);
+        let want = [0.03, 0.06, 0.06, 0.02];
+        assert!(got.iter().zip(want).all(|(g, w)| (g - w).abs() < 1e-12), "{got:?}");
+        // Capped at 1; a question not measured stays out of the family (m = 2 here).
+        let got = holm(&[0.6, f64::NAN, 0.2]);
+        assert!((got[0] - 0.6).abs() < 1e-12 && got[1].is_nan() && (got[2] - 0.4).abs() < 1e-12, "{got:?}");
+        assert_eq!(holm(&[0.9, 0.8]), vec![1.0, 1.0]);
+        // 10 of 10 against 19 others at 0.5: the smallest, 2^-10 x 20 = 0.0195, passes.
+        let mut family = vec![0.5; 19];
+        family.push(sign_test_p(10, 10));
+        assert!((holm(&family)[19] - 20.0 / 1024.0).abs() < 1e-12);
+    }
+
     use super::*;
 
     #[test]

@@ -742,6 +742,26 @@ print("ok")
 "#;
     let (agg, imp) = (report.join("aggregate.csv"), report.join("improvement.csv"));
     assert_eq!(py(check, &[agg.to_str().unwrap(), imp.to_str().unwrap()]).trim(), "ok");
+    // The questions: Holm's correction recomputed here from the uncorrected p, the return's
+    // D-REX-against-BC row equal to improvement.csv's.
+    let holm = r#"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+imp = [i for i in csv.DictReader(open(sys.argv[2])) if i["protocol"] == "final" and i["method"] == "drex" and i["baseline"] == "bc"]
+asked = {(r["method"], r["baseline"], r["measure"]) for r in rows}
+assert {("drex", "bc", "return"), ("drex", "bc", "forward"), ("drex", "demonstrations", "return"), ("drex", "demonstrations", "forward")} <= asked, asked
+ps = sorted((float(r["sign_test_p"]), i) for i, r in enumerate(rows) if r["sign_test_p"])
+m, floor = len(ps), 0.0
+for k, (p, i) in enumerate(ps):
+    floor = max(floor, min(1.0, (m - k) * p))
+    assert abs(float(rows[i]["holm_p"]) - floor) < 1e-3 and int(rows[i]["family"]) == m, (rows[i], floor, m)
+r = [r for r in rows if (r["method"], r["baseline"], r["measure"]) == ("drex", "bc", "return")][0]
+for c in ["rliable_probability", "rliable_ci_low", "paired_wins", "sign_test_p"]:
+    assert r[c] == imp[0][c], (c, r, imp)
+print("ok")
+"#;
+    let questions = report.join("questions.csv");
+    assert_eq!(py(holm, &[questions.to_str().unwrap(), imp.to_str().unwrap()]).trim(), "ok");
     assert!(report.join("figures/hopper-v5-study-study-intervals.png").exists());
     assert!(report.join("figures/hopper-v5-study-study-profile.png").exists());
     // Replicate 0's figures and the study's only: no file and no link for replicates 1 and 2.

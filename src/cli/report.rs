@@ -72,7 +72,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
     let building = crate::log::progress::Activity::start("report: tables, intervals and figures");
     let mut t = crate::report::build(&store)?;
     t.bc_warning = args.bc_warning;
-    t.terms = crate::report::terms::rows(&store, handle.as_ref());
+    t.with_terms(crate::report::terms::rows(&store, handle.as_ref()));
     if t.returns.is_empty() {
         bail!(
             "{} holds no evaluation results yet; run a pipeline first (`idrex pipeline run pipelines/smoke.yaml`)",

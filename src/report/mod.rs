@@ -17,6 +17,7 @@ pub mod improvement;
 pub mod looks;
 mod notes;
 mod protocols;
+pub mod questions;
 mod returns;
 pub mod studies;
 pub mod sweeps;
@@ -146,9 +147,20 @@ pub struct Tables {
     /// How each method's final policies earn their return ([`terms::rows`]; read from the
     /// stored rollouts, so filled by the caller that has the store).
     pub terms: Vec<terms::TermRow>,
+    /// The studies' questions with Holm's correction, the correlations and the living
+    /// counts ([`questions::ask`]; they need the terms, so [`Tables::with_terms`] fills them).
+    pub answers: questions::Answers,
 }
 
 impl Tables {
+    /// Sets the terms and answers the questions that need them.
+    pub fn with_terms(&mut self, terms: Vec<terms::TermRow>) {
+        self.terms = terms;
+        let src =
+            questions::Sources { protocols: &self.protocols, terms: &self.terms, demos: &self.demo_returns, accuracy: &self.accuracy };
+        self.answers = questions::ask(&src);
+    }
+
     /// Every table the report writes as a file, by file stem (`returns` -> `returns.csv`);
     /// the studies', looks' and clones' only where the store has any.
     pub fn files(&self) -> Vec<(&'static str, Table)> {
@@ -173,6 +185,12 @@ impl Tables {
         }
         if !self.terms.is_empty() {
             out.push(("terms", Table::of(&self.terms)));
+        }
+        if !self.answers.questions.is_empty() {
+            out.push(("questions", Table::of(&self.answers.questions)));
+        }
+        if !self.answers.correlations.is_empty() {
+            out.push(("correlations", Table::of(&self.answers.correlations)));
         }
         out
     }
@@ -211,6 +229,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         looks: looks::rows(store),
         bc_warning: crate::algo::scoring::BC_WARNING,
         terms: Vec::new(),
+        answers: questions::Answers::default(),
     })
 }
 

@@ -123,6 +123,7 @@ impl Row for AccuracyRow {
 /// The paper-style markdown, the answer first: one row per (env, pipeline).
 pub fn markdown(t: &Tables) -> String {
     let mut out = answer::markdown(&t.protocols, &t.aggregate, &t.improvement, &t.demo_returns, &t.looks, t.bc_warning);
+    out.push_str(&super::questions::markdown(&t.answers));
     out.push_str(&super::terms::living(&t.terms));
     out.push_str(&looks::markdown(&t.looks));
     out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
