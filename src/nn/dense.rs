@@ -1,6 +1,7 @@
-//! Training of ReLU MLPs (the BC policy, the T-REX reward nets) with explicit forward and
-//! backward passes over idrex's own matrix product ([`crate::kernels::gemm`]), and inference of
-//! those networks on the CPU (the learned reward in PPO, evaluation and multi-BC).
+//! Every MLP computed on the CPU: training of ReLU MLPs (the BC policy, the T-REX reward nets)
+//! with explicit forward and backward passes over idrex's own matrix product
+//! ([`crate::kernels::gemm`]), inference of those networks in batches (the learned reward in
+//! PPO, evaluation and multi-BC), and a policy's actions one row at a time in rollouts.
 //!
 //! Why not autograd: at these shapes (256 units, batches of 128 rows for BC and 6,400 for
 //! T-REX) libtorch spends a third to a half of each step outside its matrix products, in
@@ -20,25 +21,42 @@ use crate::kernels::bf16::{Precision, gemm_bf16};
 use crate::kernels::gemm::{Factor, Product, gemm};
 use crate::kernels::{Buf, transpose_rows, vectorised};
 
+/// One linear layer of an MLP held as a flat vector of parameters, libtorch's layout: the
+/// `out x in` row-major weight at `w`, then the bias. BC's and T-REX's networks ([`Dense`])
+/// and PPO's actor and critic ([`crate::algo::ppo`]) index their parameters by it.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct Layer {
-    /// Offset of the `out x in` row-major weight in the flat parameters; the bias follows it.
-    pub(super) w: usize,
-    pub(super) inp: usize,
-    pub(super) out: usize,
+pub struct Layer {
+    pub w: usize,
+    pub inp: usize,
+    pub out: usize,
 }
 
 impl Layer {
-    pub(super) fn b(&self) -> usize {
+    /// The offset of the bias.
+    pub fn b(&self) -> usize {
         self.w + self.inp * self.out
+    }
+
+    /// The weight's range in the parameters.
+    pub fn weight(&self) -> std::ops::Range<usize> {
+        self.w..self.b()
+    }
+
+    /// The bias's range in the parameters.
+    pub fn bias(&self) -> std::ops::Range<usize> {
+        self.b()..self.b() + self.out
     }
 }
 
-/// A ReLU MLP (ReLU after every layer but the last) as one flat vector of parameters, laid
-/// out as libtorch's Linear layers: per layer the `out x in` weight, then the bias.
+/// An MLP (the activation after every layer but the last) as one flat vector of parameters,
+/// laid out as libtorch's Linear layers: per layer the `out x in` weight, then the bias. What
+/// computes every network on the CPU: BC's and T-REX's training and the learned reward's
+/// batches ([`Dense::forward`], [`Dense::backward`], [`Dense::predict`]; ReLU networks), and a
+/// policy's actions one observation at a time in rollouts ([`Dense::forward_row`]).
 #[derive(Clone)]
 pub struct Dense {
     pub(super) layers: Vec<Layer>,
+    activation: Activation,
     pub params: Buf,
     /// Each layer's weight transposed (`in x out`, at the weight's offset), which the forward
     /// pass reads in place; [`Dense::refresh`] rewrites it after the parameters change.
@@ -59,18 +77,19 @@ pub struct Scratch {
 
 impl Dense {
     pub fn from_mlp(mlp: &Mlp) -> Self {
-        assert_eq!(mlp.activation(), Activation::Relu, "Dense trains ReLU networks");
         let mut layers = Vec::new();
         let mut params = Vec::new();
         for (w, b) in mlp.parameters() {
             let (out, inp) = (w.size()[0] as usize, w.size()[1] as usize);
             layers.push(Layer { w: params.len(), inp, out });
-            params.extend(Vec::<f32>::try_from(w.detach().flatten(0, -1)).expect("f32 weights"));
-            params.extend(Vec::<f32>::try_from(b.detach()).expect("f32 bias"));
+            let f32s = |t: &Tensor| t.detach().to_kind(tch::Kind::Float).flatten(0, -1);
+            params.extend(Vec::<f32>::try_from(f32s(w)).expect("f32 weights"));
+            params.extend(Vec::<f32>::try_from(f32s(b)).expect("f32 bias"));
         }
         let mut buf = Buf::zeros(params.len());
         buf.copy_from_slice(&params);
-        let mut dense = Dense { layers, params: buf, wt: Buf::zeros(params.len()), precision: Precision::F32 };
+        let (activation, wt) = (mlp.activation(), Buf::zeros(params.len()));
+        let mut dense = Dense { layers, activation, params: buf, wt, precision: Precision::F32 };
         dense.refresh();
         dense
     }
@@ -119,8 +138,35 @@ impl Dense {
         self.layers.last().expect("an MLP has layers").out
     }
 
+    pub fn input_dim(&self) -> usize {
+        self.layers[0].inp
+    }
+
+    /// Writes f(x) for one input row into `out`, layer by layer as contiguous axpys over the
+    /// transposed weights (which the compiler vectorises, a dot product it would not);
+    /// allocates nothing once `scratch` has grown. Rollouts call it once per environment
+    /// step, where a libtorch call would cost several times more.
+    pub fn forward_row(&self, x: &[f32], out: &mut [f32], scratch: &mut Vec<f32>) {
+        let width = self.layers.iter().map(|l| l.inp.max(l.out)).max().unwrap_or(0);
+        scratch.resize(2 * width, 0.0);
+        let (a, b) = scratch.split_at_mut(width);
+        a[..x.len()].copy_from_slice(x);
+        let (mut cur, mut next) = (a, b);
+        let last = self.layers.len() - 1;
+        for (i, l) in self.layers.iter().enumerate() {
+            let y = &mut next[..l.out];
+            row_layer(y, &cur[..l.inp], &self.wt[l.weight()], &self.params[l.bias()]);
+            if i < last {
+                super::activate(y, self.activation);
+            }
+            std::mem::swap(&mut cur, &mut next);
+        }
+        out.copy_from_slice(&cur[..self.output_dim()]);
+    }
+
     /// The outputs (`rows x out`) of `x` (`rows x in`), kept in `s` for [`Dense::backward`].
     pub fn forward<'s>(&self, x: &[f32], rows: usize, s: &'s mut Scratch) -> &'s [f32] {
+        assert_eq!(self.activation, Activation::Relu, "the batched passes compute ReLU networks");
         s.acts.resize_with(self.layers.len(), Buf::default);
         let last = self.layers.len() - 1;
         for (i, l) in self.layers.iter().enumerate() {
@@ -199,6 +245,26 @@ impl Dense {
     /// The sum of squared weights (not biases).
     pub fn weight_l2(&self) -> f64 {
         self.layers.iter().flat_map(|l| &self.params[l.w..l.b()]).map(|&w| (w as f64) * (w as f64)).sum()
+    }
+}
+
+vectorised! {
+    /// `y = bias + x W` for one row (`wt` is `W^T`, `x.len() x y.len()` row-major).
+    fn row_layer(y: &mut [f32], x: &[f32], wt: &[f32], bias: &[f32]) {
+        let out = y.len();
+        y.copy_from_slice(bias);
+        for (i, &xi) in x.iter().enumerate() {
+            for (yo, w) in y.iter_mut().zip(&wt[i * out..(i + 1) * out]) {
+                *yo += xi * w;
+            }
+        }
+    }
+}
+
+impl std::fmt::Debug for Dense {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let sizes: Vec<usize> = std::iter::once(self.input_dim()).chain(self.layers.iter().map(|l| l.out)).collect();
+        f.debug_struct("Dense").field("sizes", &sizes).field("activation", &self.activation).field("precision", &self.precision).finish()
     }
 }
 
@@ -292,6 +358,28 @@ mod tests {
 
     fn bits(x: &[f32]) -> Vec<u32> {
         x.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// One row at a time, tanh and ReLU networks: libtorch's forward.
+    #[test]
+    fn forward_row_matches_the_libtorch_forward() {
+        tch::manual_seed(0);
+        let vs = nn::VarStore::new(Device::Cpu);
+        for act in [Activation::Tanh, Activation::Relu] {
+            let m = Mlp::new(&(vs.root() / format!("{act:?}")), &[5, 16, 16, 3], act, Init::Default);
+            let x = Tensor::randn([4, 5], (Kind::Float, Device::Cpu));
+            let y: Vec<f32> = Vec::try_from(m.forward(&x).flatten(0, -1)).unwrap();
+            let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
+            let cpu = Dense::from_mlp(&m);
+            let mut scratch = Vec::new();
+            for r in 0..4 {
+                let mut out = [0.0f32; 3];
+                cpu.forward_row(&xs[r * 5..(r + 1) * 5], &mut out, &mut scratch);
+                for c in 0..3 {
+                    assert!((out[c] - y[r * 3 + c]).abs() < 1e-5);
+                }
+            }
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! last.
 use tch::{Tensor, nn, nn::Module};
 
-use super::cpu::MlpCpu;
+use super::dense::Dense;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -94,21 +94,9 @@ impl Mlp {
         self.layers.iter().map(|l| l.ws.square().sum(tch::Kind::Float)).reduce(|a, b| a + b).expect("an MLP has layers")
     }
 
-    pub fn to_cpu(&self) -> MlpCpu {
-        let layers = self
-            .layers
-            .iter()
-            .map(|l| {
-                let w: Vec<f32> = Vec::try_from(l.ws.detach().to_kind(tch::Kind::Float).flatten(0, -1)).expect("f32 weights");
-                let b: Vec<f32> = match &l.bs {
-                    Some(b) => Vec::try_from(b.detach().to_kind(tch::Kind::Float)).expect("f32 bias"),
-                    None => vec![0.0; l.ws.size()[0] as usize],
-                };
-                let (out, inp) = (l.ws.size()[0] as usize, l.ws.size()[1] as usize);
-                (w, b, inp, out)
-            })
-            .collect();
-        MlpCpu::new(layers, self.activation)
+    /// A frozen copy computed by idrex's own code ([`Dense`]).
+    pub fn to_cpu(&self) -> Dense {
+        Dense::from_mlp(self)
     }
 }
 

@@ -3,12 +3,12 @@
 //! ([`reward`]), saved as safetensors with a JSON sidecar ([`sidecar`]). What computes on the
 //! CPU is idrex's own code, the same bits on every processor: initial weights ([`init`]),
 //! the matrix products ([`crate::kernels::gemm`], [`crate::kernels::bf16`]), training and batch inference of ReLU MLPs
-//! ([`dense`], [`trainer`]) and per-step inference in rollouts ([`cpu`]). [`device`] picks
+//! ([`dense`], [`trainer`]; Adam in [`adam`]) and per-step inference in rollouts ([`dense`]). [`device`] picks
 //! libtorch's GPU where asked.
 
 use crate::kernels::vectorised;
 
-pub mod cpu;
+pub mod adam;
 pub mod dense;
 pub mod device;
 pub mod init;
@@ -18,7 +18,7 @@ pub mod reward;
 pub mod sidecar;
 pub mod trainer;
 
-pub use cpu::MlpCpu;
+pub use dense::{Dense, Layer};
 pub use device::{Device, DeviceChoice};
 pub use init::{building, seeded};
 pub use mlp::{Activation, Init, Mlp, WeightInit};

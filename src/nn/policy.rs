@@ -8,8 +8,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use tch::{Device, Kind, Tensor, nn, nn::Module};
 
+use super::dense::Dense;
 use super::sidecar::{check_size, load_weights, mlp_parameters, parse_json, save_weights, weights_bytes, write_json};
-use super::{Activation, Init, Mlp, MlpCpu, WeightInit};
+use super::{Activation, Init, Mlp, WeightInit};
 use crate::data::normalize::RunningMeanStd;
 use crate::error::{Error, Result};
 
@@ -192,8 +193,8 @@ impl ActorCritic {
 /// A policy evaluated in plain Rust, one observation at a time.
 #[derive(Debug, Clone)]
 pub struct CpuPolicy {
-    pub actor: MlpCpu,
-    pub critic: Option<MlpCpu>,
+    pub actor: Dense,
+    pub critic: Option<Dense>,
     pub log_std: Vec<f32>,
     pub obs_norm: Option<RunningMeanStd>,
     pub obs_clip: f64,
@@ -217,12 +218,12 @@ impl CpuPolicy {
 
     /// Mean action for an already normalised observation.
     pub fn mean(&self, nobs: &[f32], out: &mut [f32], scratch: &mut Vec<f32>) {
-        self.actor.forward(nobs, out, scratch);
+        self.actor.forward_row(nobs, out, scratch);
     }
 
     pub fn value(&self, nobs: &[f32], scratch: &mut Vec<f32>) -> f32 {
         let mut v = [0.0f32];
-        self.critic.as_ref().expect("this policy has no critic").forward(nobs, &mut v, scratch);
+        self.critic.as_ref().expect("this policy has no critic").forward_row(nobs, &mut v, scratch);
         v[0]
     }
 

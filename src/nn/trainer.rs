@@ -13,80 +13,24 @@
 use std::ops::Range;
 
 use super::Mlp;
+use super::adam::Adam;
 use super::dense::{Dense, Layer};
 use crate::kernels::bf16::Precision;
-use crate::kernels::{Buf, FlushDenormals, transpose_rows, vectorised};
+use crate::kernels::{FlushDenormals, transpose_rows};
 
 /// Every batch is split into this many lanes, whose gradients are summed in lane order; a
 /// lane is the unit of parallelism, so bytes do not depend on how many threads there are.
 pub const LANES: usize = 2;
 
-#[cfg(test)]
-vectorised! {
-    /// One Adam update of `params` from `grads`, with moments `m` and `v`, step size `step`
-    /// (the learning rate over the first moment's bias correction) and `bc2s`, the square
-    /// root of the second moment's bias correction.
-    fn adam_update(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= step * *m / (v.sqrt() / bc2s + eps);
-        }
-    }
-}
-
-vectorised! {
-    /// `adam_update` on the gradient `g0 + g1` (two lanes' sums), plus `l2 * params` where
-    /// `weights`: the bits of summing into a buffer, adding the L2 term and updating, one
-    /// pass instead of four.
-    #[allow(clippy::too_many_arguments)]
-    fn adam_update_lanes(params: &mut [f32], g0: &[f32], g1: &[f32], weights: bool, l2: f32, m: &mut [f32], v: &mut [f32], step: f32, bc2s: f32) {
-        let (b1, b2, eps) = (0.9f32, 0.999f32, 1e-8f32);
-        for ((((p, &g0), &g1), m), v) in params.iter_mut().zip(g0).zip(g1).zip(m.iter_mut()).zip(v.iter_mut()) {
-            let sum = g0 + g1;
-            let g = if weights { sum + l2 * *p } else { sum };
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= step * *m / (v.sqrt() / bc2s + eps);
-        }
-    }
-}
-
-/// Adam (betas 0.9 and 0.999, eps 1e-8, no weight decay), as libtorch's: the bias-corrected
-/// step `lr / (1 - b1^t) * m / (sqrt(v) / sqrt(1 - b2^t) + eps)`.
-pub struct Adam {
-    lr: f32,
-    m: Buf,
-    v: Buf,
-    t: i32,
-}
-
-impl Adam {
-    pub fn new(len: usize, lr: f64) -> Self {
-        Adam { lr: lr as f32, m: Buf::zeros(len), v: Buf::zeros(len), t: 0 }
-    }
-
-    /// One update from a summed gradient: the separate pass [`Trainer::step`] fuses, kept
-    /// as the tests' reference.
-    #[cfg(test)]
-    pub fn step(&mut self, params: &mut [f32], grads: &[f32]) {
-        let (step, bc2s) = self.advance();
-        adam_update(params, grads, &mut self.m, &mut self.v, step, bc2s);
-    }
-
-    /// Counts a step; its step size and the square root of its second bias correction.
-    fn advance(&mut self) -> (f32, f32) {
-        self.t += 1;
-        (self.lr / (1.0 - 0.9f32.powi(self.t)), (1.0 - 0.999f32.powi(self.t)).sqrt())
-    }
-}
+/// Adam's eps for BC and T-REX (libtorch's default).
+const EPS: f32 = 1e-8;
 
 /// What BC and T-REX share of a training run: the network, Adam, the lane threads and the
 /// summed gradient, with denormals flushed on the calling thread while it lives.
 pub struct Trainer {
     pub net: Dense,
     adam: Adam,
+    lr: f32,
     pool: LanePool,
     l2: f32,
     _ftz: FlushDenormals,
@@ -98,8 +42,8 @@ impl Trainer {
     pub fn new(mlp: &Mlp, lr: f64, l2: f64, threads: usize, precision: Precision) -> Self {
         let _ftz = FlushDenormals::new();
         let net = Dense::from_mlp(mlp).with_precision(precision);
-        let adam = Adam::new(net.len(), lr);
-        Trainer { net, adam, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
+        let adam = Adam::new(net.len());
+        Trainer { net, adam, lr: lr as f32, pool: LanePool::new(threads), l2: l2 as f32, _ftz }
     }
 
     /// Runs `f(lane, share, net)` for each of the [`LANES`] lanes, with the lane's share of
@@ -116,13 +60,14 @@ impl Trainer {
     /// by transposed rows), elementwise, so the split changes no bit. On the calling thread
     /// alone they left BC's second thread idle much of each iteration.
     pub fn step<'a>(&mut self, lane_grads: impl IntoIterator<Item = &'a [f32]>) {
-        const _: () = assert!(LANES == 2, "adam_update_lanes sums two lanes");
+        const _: () = assert!(LANES == 2, "Adam::lanes sums two lanes");
         let lanes: Vec<&[f32]> = lane_grads.into_iter().collect();
         let [g0, g1] = lanes[..] else { panic!("one gradient per lane") };
-        let (step, bc2s) = self.adam.advance();
+        let k = self.adam.advance(self.lr, EPS);
         let l2 = 2.0 * self.l2;
         let Dense { layers, params, wt, .. } = &mut self.net;
-        let mut shares = AdamShare::split(params, &mut self.adam.m, &mut self.adam.v);
+        let (m, v) = self.adam.moments();
+        let mut shares = AdamShare::split(params, m, v);
         let layers = &layers[..];
         self.pool.run(&mut shares, |share, _| {
             // Each layer's weights, then its biases, in the parameters' order.
@@ -131,7 +76,7 @@ impl Trainer {
                 if a < b {
                     let at = a - share.start..b - share.start;
                     let (p, m, v) = (&mut share.params[at.clone()], &mut share.m[at.clone()], &mut share.v[at]);
-                    adam_update_lanes(p, &g0[a..b], &g1[a..b], weights, l2, m, v, step, bc2s);
+                    Adam::lanes(k, p, &g0[a..b], &g1[a..b], weights, l2, m, v);
                 }
             }
         });
@@ -259,31 +204,6 @@ mod tests {
         assert_eq!(LANES, 2, "the lane count changes every BC and T-REX artifact: bump their stage versions with it");
     }
 
-    /// The AVX-512 build of the Adam pass gives the bits of the same operations one element
-    /// at a time.
-    #[test]
-    fn vectorised_adam_gives_the_scalar_bits() {
-        if crate::kernels::gemm::Kernel::active() != crate::kernels::gemm::Kernel::Avx512 {
-            crate::kernels::narrowed(
-                "nn::trainer::tests::vectorised_adam_gives_the_scalar_bits",
-                "AVX-512 (the scalar build is compared with itself)",
-            );
-        }
-        let n = 16 * 37 + 5;
-        let vals = |k: f32| (0..n).map(|i| ((i as f32 * k).sin() * 3.0).powi(3)).collect::<Vec<f32>>();
-        let (g, h, p0) = (vals(0.37), vals(0.91), vals(0.13));
-        // Adam.
-        let (mut p, mut m, mut v) = (p0.clone(), h.clone(), g.iter().map(|x| x * x).collect::<Vec<f32>>());
-        let (mut wp, mut wm, mut wv) = (p.clone(), m.clone(), v.clone());
-        adam_update(&mut p, &g, &mut m, &mut v, 1e-3 / 0.1, 0.0447);
-        for i in 0..n {
-            wm[i] = 0.9 * wm[i] + (1.0 - 0.9) * g[i];
-            wv[i] = 0.999 * wv[i] + (1.0 - 0.999) * g[i] * g[i];
-            wp[i] -= 1e-3 / 0.1 * wm[i] / (wv[i].sqrt() / 0.0447 + 1e-8);
-        }
-        assert_eq!((bits(&p), bits(&m), bits(&v)), (bits(&wp), bits(&wm), bits(&wv)));
-    }
-
     /// The trainer's step (fused, split over the lane threads) gives the bits of the passes
     /// it replaced, one after another on one thread: sum the lanes into a buffer, add the
     /// L2 term, Adam, transpose. Widths off the 8 x 8 blocks and an odd split included.
@@ -295,14 +215,14 @@ mod tests {
         for threads in [1, 2] {
             let mut trainer = Trainer::new(&mlp, 1e-2, 0.01, threads, Precision::F32);
             let mut want = Dense::from_mlp(&mlp);
-            let mut adam = Adam::new(want.len(), 1e-2);
+            let mut adam = Adam::new(want.len());
             for t in 0..3 {
                 let g0 = crate::kernels::gemm::test_values(want.len(), 0.37 + t as f32);
                 let g1 = crate::kernels::gemm::test_values(want.len(), 0.53 + t as f32);
                 let mut grads = g0.clone();
                 add_into(&mut grads, &g1);
                 want.add_weight_l2(0.01, &mut grads);
-                adam.step(&mut want.params, &grads);
+                adam.step_scaled(&mut want.params, &grads, 1.0, 1e-2, EPS);
                 want.refresh();
                 trainer.step([&g0[..], &g1[..]]);
                 assert_eq!(bits(&trainer.net.params), bits(&want.params), "threads {threads}, step {t}: parameters");
@@ -327,7 +247,7 @@ mod tests {
         let mlp = Mlp::new(&vs.root(), &[3, 4, 1], Activation::Relu, Init::Default);
         let mut dense = Dense::from_mlp(&mlp);
         let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
-        let mut adam = Adam::new(dense.len(), 1e-2);
+        let mut adam = Adam::new(dense.len());
         let x = Tensor::randn([6, 3], (Kind::Float, Device::Cpu));
         let xs: Vec<f32> = Vec::try_from(x.flatten(0, -1)).unwrap();
         let mut s = Scratch::default();
@@ -337,7 +257,7 @@ mod tests {
             dense.forward(&xs, 6, &mut s);
             let mut grads = vec![0.0; dense.len()];
             dense.backward(&xs, 6, &[1.0; 6], &mut s, &mut grads);
-            adam.step(&mut dense.params, &grads);
+            adam.step_scaled(&mut dense.params, &grads, 1.0, 1e-2, EPS);
             dense.refresh();
         }
         let after = Dense::from_mlp(&mlp);

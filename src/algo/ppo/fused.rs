@@ -10,16 +10,9 @@
 use std::collections::HashMap;
 
 use crate::kernels::gemm::{Factor, Product, gemm};
-use crate::kernels::vectorised;
+use crate::nn::adam::Adam;
+use crate::nn::dense::Layer;
 use crate::nn::{Activation, ActorCritic};
-
-#[derive(Debug, Clone, Copy)]
-struct Layer {
-    w: usize,
-    b: usize,
-    inp: usize,
-    out: usize,
-}
 
 /// Per-minibatch statistics, as CleanRL logs them.
 #[derive(Debug, Clone, Copy, Default)]
@@ -51,27 +44,9 @@ pub struct Fused {
     params: Vec<f32>,
     names: Vec<(String, usize, usize)>,
     grads: Vec<f32>,
-    m: Vec<f32>,
-    v: Vec<f32>,
-    steps: i32,
+    adam: Adam,
     acts_a: Vec<Vec<f32>>,
     acts_c: Vec<Vec<f32>>,
-}
-
-vectorised! {
-    /// One Adam step (betas 0.9 and 0.999) on gradients times `scale`: `k` is (scale, the
-    /// learning rate over the first moment's bias correction, the square root of the
-    /// second's, eps).
-    fn adam(params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32], k: [f32; 4]) {
-        let [scale, step, bc2s, eps] = k;
-        let (b1, b2) = (0.9f32, 0.999f32);
-        for (((p, &g), m), v) in params.iter_mut().zip(grads).zip(m.iter_mut()).zip(v.iter_mut()) {
-            let g = g * scale;
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *p -= step * *m / (v.sqrt() / bc2s + eps);
-        }
-    }
 }
 
 fn tensor_vec(t: &tch::Tensor) -> Vec<f32> {
@@ -97,7 +72,9 @@ impl Fused {
                     let size = vars.get(&wname)?.size();
                     let w = push(&wname, params);
                     let b = push(&format!("{net}.l{i}.bias"), params);
-                    Some(Layer { w, b, inp: size[1] as usize, out: size[0] as usize })
+                    let layer = Layer { w, inp: size[1] as usize, out: size[0] as usize };
+                    assert_eq!(b, layer.b(), "the bias follows its weight");
+                    Some(layer)
                 })
                 .collect()
         };
@@ -114,9 +91,7 @@ impl Fused {
             params,
             names,
             grads: vec![0.0; n],
-            m: vec![0.0; n],
-            v: vec![0.0; n],
-            steps: 0,
+            adam: Adam::new(n),
             acts_a: Vec::new(),
             acts_c: Vec::new(),
         }
@@ -145,9 +120,9 @@ impl Fused {
             let (input, rest) = acts.split_at_mut(l + 1);
             let (xin, y) = (&input[l], &mut rest[0]);
             y.resize(b * ly.out, 0.0);
-            let bias = &params[ly.b..ly.b + ly.out];
+            let bias = &params[ly.bias()];
             y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
-            let w = &params[ly.w..ly.w + ly.out * ly.inp];
+            let w = &params[ly.weight()];
             gemm(Product { m: b, n: ly.out, k: ly.inp, a: Factor::new(xin, ly.inp), b: Factor::t(w, ly.inp), accumulate: true }, y, ly.out);
             if l + 1 < layers.len() {
                 crate::nn::activate(y, act);
@@ -170,10 +145,10 @@ impl Fused {
                 }
             }
             for row in d.chunks_exact(ly.out) {
-                grads[ly.b..ly.b + ly.out].iter_mut().zip(row).for_each(|(g, v)| *g += v);
+                grads[ly.bias()].iter_mut().zip(row).for_each(|(g, v)| *g += v);
             }
             let p = Product { m: ly.out, n: ly.inp, k: b, a: Factor::t(&d, ly.out), b: Factor::new(&acts[l], ly.inp), accumulate: true };
-            gemm(p, &mut grads[ly.w..ly.w + ly.out * ly.inp], ly.inp);
+            gemm(p, &mut grads[ly.weight()], ly.inp);
             if l > 0 {
                 let mut dx = vec![0.0f32; b * ly.inp];
                 let p = Product {
@@ -181,7 +156,7 @@ impl Fused {
                     n: ly.inp,
                     k: ly.out,
                     a: Factor::new(&d, ly.out),
-                    b: Factor::new(&params[ly.w..ly.w + ly.out * ly.inp], ly.inp),
+                    b: Factor::new(&params[ly.weight()], ly.inp),
                     accumulate: false,
                 };
                 gemm(p, &mut dx, ly.inp);
@@ -289,13 +264,7 @@ impl Fused {
     pub fn clip_and_step(&mut self, max_norm: f32, lr: f32, eps: f32) {
         let norm = self.grads.iter().map(|g| g * g).sum::<f32>().sqrt();
         let scale = (max_norm / (norm + 1e-6)).min(1.0);
-        self.steps += 1;
-        let (b1, b2) = (0.9f32, 0.999f32);
-        let bc1 = 1.0 - b1.powi(self.steps);
-        let bc2 = 1.0 - b2.powi(self.steps);
-        let step = lr / bc1;
-        let bc2s = bc2.sqrt();
-        adam(&mut self.params, &self.grads, &mut self.m, &mut self.v, [scale, step, bc2s, eps]);
+        self.adam.step_scaled(&mut self.params, &self.grads, scale, lr, eps);
     }
 
     pub fn grads(&self) -> &[f32] {
