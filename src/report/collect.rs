@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use polars::prelude::*;
 
+use super::columns::Col;
 use super::protocols::RunEval;
 use super::{Artifacts, TableId, input_key, method_label, over_checkpoints, pe, terms};
 use crate::error::{Error, Result};
@@ -166,40 +167,34 @@ impl Gathered {
         Ok(())
     }
 
-    /// The rows as columns (the names [`super::build`]'s aggregations read).
+    /// The rows as columns (named by [`Col`], as [`super::build`]'s aggregations read them).
     fn into_long(self) -> Result<Long> {
-        fn column<R, T>(name: &str, rows: &[R], cell: impl Fn(&R) -> T) -> Column
-        where
-            Series: NamedFrom<Vec<T>, [T]>,
-        {
-            Column::new(name.into(), rows.iter().map(cell).collect::<Vec<T>>())
-        }
         let df = |cols: Vec<Column>| DataFrame::new_infer_height(cols).map_err(pe);
         let (e, d, a) = (&self.episodes, &self.demos, &self.accuracy);
         Ok(Long {
             episodes: df(vec![
-                column("env", e, |r| r.env.clone()),
-                column("pipeline", e, |r| r.table.clone()),
-                column("method", e, |r| r.method.clone()),
-                column("run", e, |r| r.run),
-                column("return", e, |r| r.ret),
+                Col::Env.column(e, |r| r.env.clone()),
+                Col::Pipeline.column(e, |r| r.table.clone()),
+                Col::Method.column(e, |r| r.method.clone()),
+                Col::Run.column(e, |r| r.run),
+                Col::Return.column(e, |r| r.ret),
             ])?,
             demos: df(vec![
-                column("env", d, |r| r.env.clone()),
-                column("pipeline", d, |r| r.table.clone()),
-                column("return", d, |r| r.ret),
+                Col::Env.column(d, |r| r.env.clone()),
+                Col::Pipeline.column(d, |r| r.table.clone()),
+                Col::Return.column(d, |r| r.ret),
             ])?,
             accuracy: df(vec![
-                column("env", a, |r| r.env.clone()),
-                column("pipeline", a, |r| r.table.clone()),
-                column("method", a, |r| r.method.clone()),
-                column("pearson", a, |r| r.pearson),
-                column("spearman", a, |r| r.spearman),
-                column("pairwise_accuracy", a, |r| r.pairwise_accuracy),
-                column("spearman_over_checkpoints", a, |r| r.spearman_over_checkpoints),
-                column("pearson_over_checkpoints", a, |r| r.pearson_over_checkpoints),
-                column("pearson_ssrr", a, |r| r.pearson_ssrr),
-                column("reward_capped", a, |r| r.reward_capped),
+                Col::Env.column(a, |r| r.env.clone()),
+                Col::Pipeline.column(a, |r| r.table.clone()),
+                Col::Method.column(a, |r| r.method.clone()),
+                Col::Pearson.column(a, |r| r.pearson),
+                Col::Spearman.column(a, |r| r.spearman),
+                Col::PairwiseAccuracy.column(a, |r| r.pairwise_accuracy),
+                Col::SpearmanOverCheckpoints.column(a, |r| r.spearman_over_checkpoints),
+                Col::PearsonOverCheckpoints.column(a, |r| r.pearson_over_checkpoints),
+                Col::PearsonSsrr.column(a, |r| r.pearson_ssrr),
+                Col::RewardCapped.column(a, |r| r.reward_capped),
             ])?,
             runs: self.runs,
             demo_returns: self.demo_returns,

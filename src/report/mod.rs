@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 pub mod answer;
 pub mod clones;
 mod collect;
+mod columns;
 pub mod comparisons;
 pub mod figures;
 pub mod html;
@@ -32,6 +33,7 @@ use crate::log::table::Table;
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
 use crate::store::{Manifest, Store};
+use columns::Col;
 
 pub use crate::algo::scoring::{Selection, select};
 pub use notes::notes;
@@ -206,20 +208,17 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
     let (aggregate, improvement) = studies::aggregate(&protocols, &long.demo_returns);
     let sweeps = sweeps::rows(&aggregate, &long.variants);
     let frames = aggregated(&long)?;
+    let evaluated = (0..frames.runs.height())
+        .map(|i| {
+            let name = |c: Col| c.text(&frames.runs, i);
+            Ok((name(Col::Env)?, name(Col::Pipeline)?, name(Col::Method)?, count(&frames.runs, Col::Run, i)?))
+        })
+        .collect::<Result<_>>()?;
     Ok(Tables {
-        returns: return_rows(&frames.returns),
-        evaluated: (0..frames.runs.height())
-            .map(|i| {
-                (
-                    cell_s(&frames.runs, "env", i),
-                    cell_s(&frames.runs, "pipeline", i),
-                    cell_s(&frames.runs, "method", i),
-                    count(&frames.runs, "run", i),
-                )
-            })
-            .collect(),
-        demos: demo_rows(&frames.demos),
-        accuracy: accuracy_rows(&frames.accuracy),
+        returns: return_rows(&frames.returns)?,
+        evaluated,
+        demos: demo_rows(&frames.demos)?,
+        accuracy: accuracy_rows(&frames.accuracy)?,
         protocols,
         aggregate,
         improvement,
@@ -243,20 +242,22 @@ struct Frames {
 }
 
 fn aggregated(long: &collect::Long) -> Result<Frames> {
-    let keys = [col("env"), col("pipeline"), col("method")];
+    use Col::*;
+    let keys = [Env.expr(), Pipeline.expr(), Method.expr()];
+    let sorted = [Env.name(), Pipeline.name(), Method.name()];
     let per_run = long
         .episodes
         .clone()
         .lazy()
-        .group_by([col("env"), col("pipeline"), col("method"), col("run")])
-        .agg([col("return").mean().alias("run_mean")])
+        .group_by([Env.expr(), Pipeline.expr(), Method.expr(), Run.expr()])
+        .agg([Return.expr().mean().alias(RunMean.name())])
         .group_by(keys.clone())
-        .agg([col("run_mean").max().alias("best_run_avg"), col("run").n_unique().alias("runs")]);
+        .agg([RunMean.expr().max().alias(BestRunAvg.name()), Run.expr().n_unique().alias(Runs.name())]);
     let runs = long
         .episodes
         .clone()
         .lazy()
-        .select([col("env"), col("pipeline"), col("method"), col("run")])
+        .select([Env.expr(), Pipeline.expr(), Method.expr(), Run.expr()])
         .unique(None, Default::default())
         .collect()
         .map_err(pe)?;
@@ -265,90 +266,96 @@ fn aggregated(long: &collect::Long) -> Result<Frames> {
         .clone()
         .lazy()
         .group_by(keys.clone())
-        .agg([col("return").mean().alias("mean"), col("return").std(0).alias("std"), col("return").count().alias("episodes")])
+        .agg([
+            Return.expr().mean().alias(Mean.name()),
+            Return.expr().std(0).alias(Std.name()),
+            Return.expr().count().alias(Episodes.name()),
+        ])
         .join(per_run, keys.clone(), keys.clone(), JoinArgs::new(JoinType::Left))
-        .sort(["env", "pipeline", "method"], Default::default())
+        .sort(sorted, Default::default())
         .collect()
         .map_err(pe)?;
     let demos = long
         .demos
         .clone()
         .lazy()
-        .group_by([col("env"), col("pipeline")])
-        .agg([col("return").mean().alias("demos_avg"), col("return").max().alias("demos_best"), col("return").count().alias("demos")])
-        .sort(["env", "pipeline"], Default::default())
+        .group_by([Env.expr(), Pipeline.expr()])
+        .agg([
+            Return.expr().mean().alias(DemosAvg.name()),
+            Return.expr().max().alias(DemosBest.name()),
+            Return.expr().count().alias(Demos.name()),
+        ])
+        .sort([Env.name(), Pipeline.name()], Default::default())
         .collect()
         .map_err(pe)?;
+    let means = [Pearson, Spearman, PairwiseAccuracy, SpearmanOverCheckpoints, PearsonOverCheckpoints, PearsonSsrr, RewardCapped];
     let accuracy = long
         .accuracy
         .clone()
         .lazy()
         .group_by(keys)
-        .agg([
-            col("pearson").mean(),
-            col("spearman").mean(),
-            col("pairwise_accuracy").mean(),
-            col("spearman_over_checkpoints").mean(),
-            col("pearson_over_checkpoints").mean(),
-            col("pearson_ssrr").mean(),
-            col("reward_capped").mean(),
-            col("spearman").count().alias("runs"),
-        ])
-        .sort(["env", "pipeline", "method"], Default::default())
+        .agg(means.iter().map(|c| c.expr().mean()).chain([Spearman.expr().count().alias(Runs.name())]).collect::<Vec<_>>())
+        .sort(sorted, Default::default())
         .collect()
         .map_err(pe)?;
     Ok(Frames { returns, runs, demos, accuracy })
 }
 
 // polars' aggregates, read into typed rows once; everything downstream reads the rows.
-fn value(df: &DataFrame, c: &str, i: usize) -> f64 {
-    cell_f(df, c, i).unwrap_or(f64::NAN)
+fn value(df: &DataFrame, c: Col, i: usize) -> Result<f64> {
+    Ok(c.f64(df, i)?.unwrap_or(f64::NAN))
 }
-fn count(df: &DataFrame, c: &str, i: usize) -> usize {
-    cell_f(df, c, i).unwrap_or(0.0) as usize
+fn count(df: &DataFrame, c: Col, i: usize) -> Result<usize> {
+    Ok(c.f64(df, i)?.unwrap_or(0.0) as usize)
 }
 
-fn return_rows(df: &DataFrame) -> Vec<ReturnRow> {
+fn return_rows(df: &DataFrame) -> Result<Vec<ReturnRow>> {
     (0..df.height())
-        .map(|i| ReturnRow {
-            env: cell_s(df, "env", i),
-            pipeline: cell_s(df, "pipeline", i),
-            method: cell_s(df, "method", i),
-            mean: value(df, "mean", i),
-            std: value(df, "std", i),
-            episodes: count(df, "episodes", i),
-            best_run_avg: value(df, "best_run_avg", i),
-            runs: count(df, "runs", i),
+        .map(|i| {
+            Ok(ReturnRow {
+                env: Col::Env.text(df, i)?,
+                pipeline: Col::Pipeline.text(df, i)?,
+                method: Col::Method.text(df, i)?,
+                mean: value(df, Col::Mean, i)?,
+                std: value(df, Col::Std, i)?,
+                episodes: count(df, Col::Episodes, i)?,
+                best_run_avg: value(df, Col::BestRunAvg, i)?,
+                runs: count(df, Col::Runs, i)?,
+            })
         })
         .collect()
 }
 
-fn demo_rows(df: &DataFrame) -> Vec<DemoRow> {
+fn demo_rows(df: &DataFrame) -> Result<Vec<DemoRow>> {
     (0..df.height())
-        .map(|i| DemoRow {
-            env: cell_s(df, "env", i),
-            pipeline: cell_s(df, "pipeline", i),
-            demos_avg: value(df, "demos_avg", i),
-            demos_best: value(df, "demos_best", i),
-            demos: count(df, "demos", i),
+        .map(|i| {
+            Ok(DemoRow {
+                env: Col::Env.text(df, i)?,
+                pipeline: Col::Pipeline.text(df, i)?,
+                demos_avg: value(df, Col::DemosAvg, i)?,
+                demos_best: value(df, Col::DemosBest, i)?,
+                demos: count(df, Col::Demos, i)?,
+            })
         })
         .collect()
 }
 
-fn accuracy_rows(df: &DataFrame) -> Vec<AccuracyRow> {
+fn accuracy_rows(df: &DataFrame) -> Result<Vec<AccuracyRow>> {
     (0..df.height())
-        .map(|i| AccuracyRow {
-            env: cell_s(df, "env", i),
-            pipeline: cell_s(df, "pipeline", i),
-            method: cell_s(df, "method", i),
-            pearson: value(df, "pearson", i),
-            spearman: value(df, "spearman", i),
-            pairwise_accuracy: value(df, "pairwise_accuracy", i),
-            spearman_over_checkpoints: value(df, "spearman_over_checkpoints", i),
-            pearson_over_checkpoints: value(df, "pearson_over_checkpoints", i),
-            pearson_ssrr: value(df, "pearson_ssrr", i),
-            reward_capped: cell_f(df, "reward_capped", i),
-            runs: count(df, "runs", i),
+        .map(|i| {
+            Ok(AccuracyRow {
+                env: Col::Env.text(df, i)?,
+                pipeline: Col::Pipeline.text(df, i)?,
+                method: Col::Method.text(df, i)?,
+                pearson: value(df, Col::Pearson, i)?,
+                spearman: value(df, Col::Spearman, i)?,
+                pairwise_accuracy: value(df, Col::PairwiseAccuracy, i)?,
+                spearman_over_checkpoints: value(df, Col::SpearmanOverCheckpoints, i)?,
+                pearson_over_checkpoints: value(df, Col::PearsonOverCheckpoints, i)?,
+                pearson_ssrr: value(df, Col::PearsonSsrr, i)?,
+                reward_capped: Col::RewardCapped.f64(df, i)?,
+                runs: count(df, Col::Runs, i)?,
+            })
         })
         .collect()
 }
@@ -359,11 +366,4 @@ fn num(x: Option<f64>) -> String {
         Some(v) if v.is_finite() => format!("{v:.1}"),
         _ => "n/a".into(),
     }
-}
-
-fn cell_f(df: &DataFrame, name: &str, i: usize) -> Option<f64> {
-    df.column(name).ok()?.cast(&DataType::Float64).ok()?.f64().ok()?.get(i)
-}
-fn cell_s(df: &DataFrame, name: &str, i: usize) -> String {
-    df.column(name).ok().and_then(|c| c.str().ok().and_then(|s| s.get(i).map(str::to_string))).unwrap_or_default()
 }
