@@ -2,6 +2,20 @@
 //! it, so names never change; code names a role by [`Role`], and the name is written only at
 //! the boundary (keys, manifests, Slurm definitions) and read back with [`Role::parse`].
 
+/// The key of a stored artifact's input in `role`, read from its manifest: the one place
+/// outside the stages' own parsing ([`crate::pipeline::stage::Inputs::from_recorded`]) where a
+/// recorded role name is read (the report's lineage queries and the test-set check go
+/// through it).
+pub fn recorded_input(m: &crate::store::Manifest, role: Role) -> Option<&String> {
+    m.inputs.get(&role.name())
+}
+
+/// The keys of a stored artifact's inputs in `series` (a reward's ranked sets), in the
+/// manifest's order.
+pub fn recorded_series(m: &crate::store::Manifest, series: Series) -> impl Iterator<Item = &String> {
+    m.inputs.iter().filter(move |(name, _)| Role::named_in(name, series)).map(|(_, k)| k)
+}
+
 /// What a stage reads an input as.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Role {

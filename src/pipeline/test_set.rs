@@ -39,7 +39,7 @@ impl Look {
             seed: m.seed,
             method: p.method,
             iteration: p.iteration,
-            policy: m.inputs.get(&super::role::Role::Policy.name())?.clone(),
+            policy: super::role::recorded_input(m, super::role::Role::Policy)?.clone(),
             study: p.pipeline,
             mark: m.test_set.clone(),
         })

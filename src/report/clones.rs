@@ -43,7 +43,7 @@ pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
     let mut seen = BTreeSet::new();
     let mut out = Vec::new();
     for m in store.iter() {
-        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
+        let Some(Typed { params: Params::Eval(p), .. }) = store.typed(m) else { continue };
         if p.method != Method::IdrexMultiBc {
             continue;
         }
@@ -52,8 +52,8 @@ pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
             if !seen.insert((p.table(), key.clone())) {
                 continue;
             }
-            let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm) else { continue };
-            out.extend(x.clones.into_iter().map(|record| CloneRow {
+            let Some(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = store.typed(sm) else { continue };
+            out.extend(x.clones.iter().cloned().map(|record| CloneRow {
                 env: p.env.name().to_string(),
                 pipeline: p.table(),
                 node: sm.node.clone(),

@@ -81,10 +81,8 @@ pub(super) fn collect(store: &Artifacts) -> Result<Long> {
     let ssrr = terms::ssrr_pearson(store);
     let mut g = Gathered::default();
     for m in store.iter().filter(|m| m.kind == crate::pipeline::stage::StageKind::Eval.name()) {
-        match Typed::of(m) {
-            Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) => g.add(store, &ssrr, m, &p, &x)?,
-            Ok(_) => {}
-            Err(e) => tracing::warn!("skipping {}: {e}", m.key),
+        if let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = store.typed(m) {
+            g.add(store, &ssrr, m, p, x)?;
         }
     }
     if let Some(((e, study), sources)) = g.demo_sources.iter().find(|(_, s)| s.len() > 1) {
@@ -131,7 +129,7 @@ impl Gathered {
         self.runs.entry((env.clone(), table.clone(), method.clone())).or_default().push(run);
         if let Some(acc) = &x.reward {
             let reward = input_key(m, Role::Reward).cloned().unwrap_or_default();
-            let ppo = store.input(m, Role::Policy).and_then(|pm| Typed::of(pm).ok());
+            let ppo = store.input(m, Role::Policy).and_then(|pm| store.typed(pm));
             self.accuracy.push(AccuracyRunRow {
                 env: env.clone(),
                 table: table.label.clone(),
@@ -152,7 +150,7 @@ impl Gathered {
         if let Some(dk) = input_key(m, Role::Demos)
             && self.demo_keys.insert((env.clone(), table.label.clone(), dk.clone()))
             && let Some(dm) = store.get(dk)
-            && let Ok(Typed { params, metrics: Metrics::Demos(d) | Metrics::DemosImport(d) }) = Typed::of(dm)
+            && let Some(Typed { params, metrics: Metrics::Demos(d) | Metrics::DemosImport(d) }) = store.typed(dm)
         {
             let source = match params {
                 Params::DemosImport(i) => format!("the file with sha256 {}", &i.sha256[..12]),

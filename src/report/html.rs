@@ -129,7 +129,7 @@ pub fn rollout_links(artifacts: &super::Artifacts, store: Option<&crate::store::
         .iter()
         .filter(|m| !artifacts.is_archived(&m.key))
         .filter_map(|m| {
-            let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { return None };
+            let Some(Typed { params: Params::Eval(p), .. }) = artifacts.typed(m) else { return None };
             let file = m.outputs.iter().find(|o| o.path.ends_with(".mcap"))?;
             let at = store.dir(&m.key).join(&file.path);
             let at = std::fs::canonicalize(&at).unwrap_or(at);

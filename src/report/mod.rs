@@ -32,6 +32,7 @@ use crate::error::{Error, Result};
 use crate::log::table::Table;
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
+use crate::pipeline::stage::{StageKind, Typed};
 use crate::store::{Manifest, Store};
 use columns::Col;
 
@@ -74,13 +75,22 @@ struct TableId {
 #[derive(Default)]
 pub struct Artifacts {
     by_key: BTreeMap<String, Manifest>,
+    /// Each manifest read once through its stage's types (those that parse).
+    typed: BTreeMap<String, Typed>,
     /// Keys known from an archive alone: no outputs on this machine.
     archived: std::collections::BTreeSet<String>,
 }
 
 impl Artifacts {
     pub fn read(store: &Store) -> Result<Self> {
-        Ok(Artifacts { by_key: store.manifests()?.into_iter().map(|m| (m.key.clone(), m)).collect(), ..Default::default() })
+        Ok(Self::of(store.manifests()?))
+    }
+
+    /// These manifests, each read through its stage's types once.
+    pub fn of(manifests: impl IntoIterator<Item = Manifest>) -> Self {
+        let mut a = Artifacts { by_key: manifests.into_iter().map(|m| (m.key.clone(), m)).collect(), ..Default::default() };
+        a.type_new();
+        a
     }
 
     /// Adds an archive's manifests; returns how many were not known yet.
@@ -89,7 +99,30 @@ impl Artifacts {
         let before: std::collections::BTreeSet<String> = self.by_key.keys().cloned().collect();
         let added = crate::store::archive::merge(&mut self.by_key, path, archived)?;
         self.archived.extend(self.by_key.keys().filter(|k| !before.contains(*k)).cloned());
+        self.type_new();
         Ok(added)
+    }
+
+    /// Reads the manifests not typed yet through their stages' types, once; an evaluation
+    /// that does not parse (an older idrex's) is left out of every table with a warning.
+    fn type_new(&mut self) {
+        for (key, m) in &self.by_key {
+            if self.typed.contains_key(key) {
+                continue;
+            }
+            match Typed::of(m) {
+                Ok(t) => {
+                    self.typed.insert(key.clone(), t);
+                }
+                Err(e) if m.kind == StageKind::Eval.name() => tracing::warn!("skipping {key}: {e}"),
+                Err(e) => tracing::debug!("{key} ({}): {e}", m.kind),
+            }
+        }
+    }
+
+    /// `m` read through its stage's types, if it parses.
+    pub fn typed(&self, m: &Manifest) -> Option<&Typed> {
+        self.typed.get(&m.key)
     }
 
     /// Whether `key` is known from an archive only (its outputs are not on this machine).
@@ -112,14 +145,14 @@ impl Artifacts {
 
     /// `m`'s inputs in `series` that are known here, with their keys (a reward's ranked sets).
     pub fn inputs_in<'a>(&'a self, m: &'a Manifest, series: Series) -> impl Iterator<Item = (&'a String, &'a Manifest)> + 'a {
-        m.inputs.iter().filter(move |(name, _)| Role::named_in(name, series)).filter_map(|(_, k)| Some((k, self.get(k)?)))
+        crate::pipeline::role::recorded_series(m, series).filter_map(|k| Some((k, self.get(k)?)))
     }
 }
 
 /// The key of `m`'s input in `role`: the report's one reading of a manifest's recorded role
 /// names (lineage queries on [`Artifacts`] go through it).
 pub fn input_key(m: &Manifest, role: Role) -> Option<&String> {
-    m.inputs.get(&role.name())
+    crate::pipeline::role::recorded_input(m, role)
 }
 
 /// The report's typed rows, every table of it (CSV, markdown, HTML and figures read these).

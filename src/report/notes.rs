@@ -14,14 +14,14 @@ pub fn notes(store: &Artifacts) -> Result<String> {
     let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
     let mut seen = std::collections::BTreeSet::new();
     for m in store.iter() {
-        let Ok(Typed { params: Params::Eval(p), .. }) = Typed::of(m) else { continue };
+        let Some(Typed { params: Params::Eval(p), .. }) = store.typed(m) else { continue };
         let Some(reward) = super::input_key(m, Role::Reward) else { continue };
         if !seen.insert((p.pipeline.clone(), reward.clone())) {
             continue;
         }
         let Some(rm) = store.get(reward) else { continue };
         let group = lines.entry((p.env.name().to_string(), p.pipeline.clone())).or_default();
-        if let Ok(Typed { metrics: Metrics::Trex(t), .. }) = Typed::of(rm) {
+        if let Some(Typed { metrics: Metrics::Trex(t), .. }) = store.typed(rm) {
             let label = if p.iteration > 2 { format!("{} (k={})", p.method.label(), p.iteration) } else { p.method.label().to_string() };
             group.insert(format!(
                 "{label}: the learned reward ({}) ranks {:.1} % of held-out training pairs correctly; on its training set Pearson {:.2}",
@@ -31,7 +31,7 @@ pub fn notes(store: &Artifacts) -> Result<String> {
             ));
         }
         for (_, sm) in store.inputs_in(rm, Series::Set) {
-            if let Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = Typed::of(sm) {
+            if let Some(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) = store.typed(sm) {
                 let kept = x.kept();
                 let measured: Vec<String> = x
                     .clones

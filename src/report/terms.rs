@@ -97,16 +97,16 @@ pub fn rows(arts: &Artifacts, store: Option<&Store>) -> Vec<TermRow> {
     let mut groups: BTreeMap<(EnvId, String, String), Sums> = BTreeMap::new();
     let mut demos_seen = std::collections::BTreeSet::new();
     for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
-        let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
+        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = arts.typed(m) else { continue };
         // The demonstrations the table compares with, once per table: idrex's own only (an
         // imported file's terms are not known).
         if let Some(dk) = super::input_key(m, Role::Demos)
             && demos_seen.insert((p.table(), dk.clone()))
             && let Some(dm) = arts.get(dk)
-            && let Ok(Typed { metrics: Metrics::Demos(d), .. }) = Typed::of(dm)
-            && let Some(terms) = terms_of(&d, dm, arts, store)
+            && let Some(Typed { metrics: Metrics::Demos(d), .. }) = arts.typed(dm)
+            && let Some(terms) = terms_of(d, dm, arts, store)
         {
-            add(groups.entry((p.env, p.table(), DEMOS.to_string())).or_default(), &d, &terms);
+            add(groups.entry((p.env, p.table(), DEMOS.to_string())).or_default(), d, &terms);
         }
         let Some(terms) = terms_of(&x.summary, m, arts, store) else { continue };
         let sums = groups.entry((p.env, p.table(), method_label(p.method, p.iteration))).or_default();
@@ -155,7 +155,7 @@ fn terms_of(s: &RolloutSummary, m: &Manifest, arts: &Artifacts, store: Option<&S
 /// stage's metrics, or (before they recorded lengths) its model and ranked set's files.
 fn ranked_of(arts: &Artifacts, store: Option<&Store>, key: &str) -> Option<(f64, f64)> {
     let m = arts.get(key)?;
-    let Ok(Typed { metrics: Metrics::Trex(x), .. }) = Typed::of(m) else { return None };
+    let Some(Typed { metrics: Metrics::Trex(x), .. }) = arts.typed(m) else { return None };
     let t = &x.train_set;
     if t.lengths.len() == t.noise.len() {
         let at = |noise: f64| {
@@ -214,7 +214,7 @@ fn reward_of(m: &Manifest) -> Option<&String> {
 pub fn ssrr_pearson(arts: &Artifacts) -> BTreeMap<(String, String), f64> {
     let mut unseen: BTreeMap<(String, String), (Vec<f64>, Vec<f64>)> = BTreeMap::new();
     for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
-        let (Some(k), Ok(Typed { params: Params::Eval(e), metrics: Metrics::Eval(x) })) = (reward_of(m), Typed::of(m)) else { continue };
+        let (Some(k), Some(Typed { params: Params::Eval(e), metrics: Metrics::Eval(x) })) = (reward_of(m), arts.typed(m)) else { continue };
         if let Some(acc) = &x.reward {
             let (p, t) = unseen.entry((k.clone(), e.table())).or_default();
             p.extend(&acc.predicted_returns);
@@ -224,7 +224,7 @@ pub fn ssrr_pearson(arts: &Artifacts) -> BTreeMap<(String, String), f64> {
     unseen
         .into_iter()
         .filter_map(|((k, table), (p, t))| {
-            let Ok(Typed { metrics: Metrics::Trex(x), .. }) = Typed::of(arts.get(&k)?) else { return None };
+            let Some(Typed { metrics: Metrics::Trex(x), .. }) = arts.typed(arts.get(&k)?) else { return None };
             let predicted: Vec<f64> = x.train_set.scored.predicted.iter().chain(&x.demos.predicted).chain(&p).copied().collect();
             let truth: Vec<f64> = x.train_set.scored.truth.iter().chain(&x.demos.truth).chain(&t).copied().collect();
             Some(((k, table), pearson(&predicted, &truth)))

@@ -75,7 +75,7 @@ fn store() -> Artifacts {
             add(manifest(&format!("drex{r}-{run}"), &Params::Eval(eval(Method::Drex, run)), &Metrics::Eval(x), &[("demos", &demos)]));
         }
     }
-    Artifacts { by_key, ..Default::default() }
+    Artifacts::of(by_key.into_values())
 }
 
 fn row<'a>(t: &'a Tables, pipeline: &str, method: &str, protocol: Protocol) -> &'a ProtocolRow {
@@ -158,14 +158,14 @@ fn a_study_of_two_replicates_is_aggregated_over_them() {
 
 #[test]
 fn a_study_whose_files_disagree_on_the_demonstrations_is_refused() {
-    let mut s = store();
     let imported = Params::DemosImport(crate::pipeline::stage::demos::ImportParams {
         env: EnvId::Hopper,
         path: "d.npz".into(),
         sha256: "ab".repeat(32),
     });
     let m = manifest("demos2", &imported, &Metrics::DemosImport(summary(&[1.0])), &[]);
-    s.by_key.insert(m.key.clone(), m);
+    // Replicate 2's demonstrations replaced by an imported file's.
+    let s = Artifacts::of(store().iter().filter(|x| x.key != "demos2").cloned().chain([m]));
     let err = build(&s).err().expect("refused").to_string();
     assert!(err.contains("disagree on the demonstrations"), "{err}");
 }

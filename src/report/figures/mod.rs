@@ -186,9 +186,9 @@ struct Group {
     replicate: usize,
 }
 
-fn typed<'a>(store: &'a Artifacts, key: &str) -> Option<(&'a Manifest, Typed)> {
+fn typed<'a>(store: &'a Artifacts, key: &str) -> Option<(&'a Manifest, &'a Typed)> {
     let m = store.get(key)?;
-    Some((m, Typed::of(m).ok()?))
+    Some((m, store.typed(m)?))
 }
 
 fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
@@ -202,8 +202,8 @@ fn degradation_of(m: &Metrics) -> Option<Vec<DegradationLevel>> {
 
 /// The uniform-random return a multi-BC stage (by node name) measured.
 fn store_random(store: &Artifacts, node: &str) -> Option<f64> {
-    store.iter().filter(|m| m.node == node).find_map(|m| match Typed::of(m) {
-        Ok(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) => Some(x.random_return),
+    store.iter().filter(|m| m.node == node).find_map(|m| match store.typed(m) {
+        Some(Typed { metrics: Metrics::MultiBcRollouts(x), .. }) => Some(x.random_return),
         _ => None,
     })
 }
@@ -239,7 +239,7 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
         if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
             continue;
         }
-        let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
+        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = store.typed(m) else { continue };
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         g.replicate = p.replicate;
         if g.demos.is_none()
@@ -267,7 +267,7 @@ fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
         if let Some(rm) = store.get(reward) {
             for (key, sm) in store.inputs_in(rm, Series::Set) {
                 if !g.sets.contains_key(key)
-                    && let Ok(st) = Typed::of(sm)
+                    && let Some(st) = store.typed(sm)
                     && let Some(levels) = degradation_of(&st.metrics)
                 {
                     g.sets.insert(key.clone(), (sm.node.clone(), levels));
