@@ -248,6 +248,81 @@ impl Dense {
     }
 }
 
+/// An MLP whose parameters sit in a vector it shares: PPO's actor, critic and log-std live in
+/// one vector, so that one Adam step and one gradient norm cover them ([`crate::algo::ppo`]).
+/// Its layers index that vector as [`Dense`]'s index its own; its passes read the weights
+/// untransposed and start each row from the bias, the order PPO's stored bytes come from
+/// ([`Dense`] adds the bias last).
+#[derive(Debug, Clone)]
+pub struct SharedDense {
+    pub layers: Vec<Layer>,
+    pub activation: Activation,
+}
+
+impl SharedDense {
+    pub fn output_dim(&self) -> usize {
+        self.layers.last().expect("an MLP has layers").out
+    }
+
+    /// `acts[0] = x`, `acts[l + 1]` = output of layer l: each row starts from the bias and
+    /// adds `x W^T` through idrex's matrix product ([`crate::kernels::gemm`]: the same bits on
+    /// every processor).
+    pub fn forward(&self, params: &[f32], x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>) {
+        let (layers, act) = (&self.layers[..], self.activation);
+        acts.resize(layers.len() + 1, Vec::new());
+        acts[0].clear();
+        acts[0].extend_from_slice(x);
+        for (l, ly) in layers.iter().enumerate() {
+            let (input, rest) = acts.split_at_mut(l + 1);
+            let (xin, y) = (&input[l], &mut rest[0]);
+            y.resize(b * ly.out, 0.0);
+            let bias = &params[ly.bias()];
+            y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
+            let w = &params[ly.weight()];
+            gemm(Product { m: b, n: ly.out, k: ly.inp, a: Factor::new(xin, ly.inp), b: Factor::t(w, ly.inp), accumulate: true }, y, ly.out);
+            if l + 1 < layers.len() {
+                super::activate(y, act);
+            }
+        }
+    }
+
+    /// Adds the gradient of every layer's parameters, given the gradient `d` with respect to
+    /// the last layer's outputs: per layer `dW += d^T x`, `db +=` the column sums of `d`, and
+    /// `d x W` passed down through the activation.
+    pub fn backward(&self, params: &[f32], grads: &mut [f32], acts: &[Vec<f32>], mut d: Vec<f32>, b: usize) {
+        let (layers, act) = (&self.layers[..], self.activation);
+        for l in (0..layers.len()).rev() {
+            let ly = layers[l];
+            if l + 1 < layers.len() {
+                for (dv, y) in d.iter_mut().zip(&acts[l + 1]) {
+                    *dv *= match act {
+                        Activation::Tanh => 1.0 - y * y,
+                        Activation::Relu => f32::from(*y > 0.0),
+                    };
+                }
+            }
+            for row in d.chunks_exact(ly.out) {
+                grads[ly.bias()].iter_mut().zip(row).for_each(|(g, v)| *g += v);
+            }
+            let p = Product { m: ly.out, n: ly.inp, k: b, a: Factor::t(&d, ly.out), b: Factor::new(&acts[l], ly.inp), accumulate: true };
+            gemm(p, &mut grads[ly.weight()], ly.inp);
+            if l > 0 {
+                let mut dx = vec![0.0f32; b * ly.inp];
+                let p = Product {
+                    m: b,
+                    n: ly.inp,
+                    k: ly.out,
+                    a: Factor::new(&d, ly.out),
+                    b: Factor::new(&params[ly.weight()], ly.inp),
+                    accumulate: false,
+                };
+                gemm(p, &mut dx, ly.inp);
+                d = dx;
+            }
+        }
+    }
+}
+
 vectorised! {
     /// `y = bias + x W` for one row (`wt` is `W^T`, `x.len() x y.len()` row-major).
     fn row_layer(y: &mut [f32], x: &[f32], wt: &[f32], bias: &[f32]) {

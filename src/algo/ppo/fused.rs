@@ -1,5 +1,6 @@
 //! PPO's minibatch update (losses, backward pass, gradient-norm clipping, Adam) written out
-//! in plain Rust for the small actor-critic MLPs PPO uses on MuJoCo.
+//! in plain Rust for the small actor-critic MLPs PPO uses on MuJoCo: the loss here, the
+//! networks' passes in [`crate::nn::dense::SharedDense`], the step in [`crate::nn::adam`].
 //!
 //! Why: a 64-64 network on a minibatch of 64 is a few hundred thousand multiply-adds, far
 //! less than libtorch's per-operator overhead; with autograd each of the 320 gradient steps
@@ -9,10 +10,9 @@
 //! loss and every gradient against libtorch's autograd of the same loss.
 use std::collections::HashMap;
 
-use crate::kernels::gemm::{Factor, Product, gemm};
+use crate::nn::ActorCritic;
 use crate::nn::adam::Adam;
-use crate::nn::dense::Layer;
-use crate::nn::{Activation, ActorCritic};
+use crate::nn::dense::{Layer, SharedDense};
 
 /// Per-minibatch statistics, as CleanRL logs them.
 #[derive(Debug, Clone, Copy, Default)]
@@ -35,11 +35,10 @@ pub struct LossConfig {
 }
 
 pub struct Fused {
-    actor: Vec<Layer>,
-    critic: Vec<Layer>,
+    actor: SharedDense,
+    critic: SharedDense,
     log_std: usize,
     act_dim: usize,
-    activation: Activation,
     /// Every parameter, flat; `names` maps VarStore names to (offset, len).
     params: Vec<f32>,
     names: Vec<(String, usize, usize)>,
@@ -78,16 +77,16 @@ impl Fused {
                 })
                 .collect()
         };
-        let actor = layers("actor", &mut params);
-        let critic = layers("critic", &mut params);
+        let activation = agent.config.activation;
+        let actor = SharedDense { layers: layers("actor", &mut params), activation };
+        let critic = SharedDense { layers: layers("critic", &mut params), activation };
         let log_std = push("log_std", &mut params);
         let n = params.len();
         Fused {
-            act_dim: actor.last().expect("an actor").out,
+            act_dim: actor.output_dim(),
             actor,
             critic,
             log_std,
-            activation: agent.config.activation,
             params,
             names,
             grads: vec![0.0; n],
@@ -109,62 +108,6 @@ impl Fused {
         });
     }
 
-    /// `acts[0] = x`, `acts[l + 1]` = output of layer l: each row starts from the bias and
-    /// adds `x W^T` through idrex's matrix product ([`crate::kernels::gemm`]: the same bits on
-    /// every processor).
-    fn forward(params: &[f32], layers: &[Layer], act: Activation, x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>) {
-        acts.resize(layers.len() + 1, Vec::new());
-        acts[0].clear();
-        acts[0].extend_from_slice(x);
-        for (l, ly) in layers.iter().enumerate() {
-            let (input, rest) = acts.split_at_mut(l + 1);
-            let (xin, y) = (&input[l], &mut rest[0]);
-            y.resize(b * ly.out, 0.0);
-            let bias = &params[ly.bias()];
-            y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
-            let w = &params[ly.weight()];
-            gemm(Product { m: b, n: ly.out, k: ly.inp, a: Factor::new(xin, ly.inp), b: Factor::t(w, ly.inp), accumulate: true }, y, ly.out);
-            if l + 1 < layers.len() {
-                crate::nn::activate(y, act);
-            }
-        }
-    }
-
-    /// Adds the gradient of every layer's parameters, given the gradient `d` with respect to
-    /// the last layer's outputs: per layer `dW += d^T x`, `db +=` the column sums of `d`, and
-    /// `d x W` passed down through the activation.
-    fn backward(params: &[f32], grads: &mut [f32], layers: &[Layer], act: Activation, acts: &[Vec<f32>], mut d: Vec<f32>, b: usize) {
-        for l in (0..layers.len()).rev() {
-            let ly = layers[l];
-            if l + 1 < layers.len() {
-                for (dv, y) in d.iter_mut().zip(&acts[l + 1]) {
-                    *dv *= match act {
-                        Activation::Tanh => 1.0 - y * y,
-                        Activation::Relu => f32::from(*y > 0.0),
-                    };
-                }
-            }
-            for row in d.chunks_exact(ly.out) {
-                grads[ly.bias()].iter_mut().zip(row).for_each(|(g, v)| *g += v);
-            }
-            let p = Product { m: ly.out, n: ly.inp, k: b, a: Factor::t(&d, ly.out), b: Factor::new(&acts[l], ly.inp), accumulate: true };
-            gemm(p, &mut grads[ly.weight()], ly.inp);
-            if l > 0 {
-                let mut dx = vec![0.0f32; b * ly.inp];
-                let p = Product {
-                    m: b,
-                    n: ly.inp,
-                    k: ly.out,
-                    a: Factor::new(&d, ly.out),
-                    b: Factor::new(&params[ly.weight()], ly.inp),
-                    accumulate: false,
-                };
-                gemm(p, &mut dx, ly.inp);
-                d = dx;
-            }
-        }
-    }
-
     /// Computes the PPO loss of one minibatch and leaves its gradient in `self.grads`.
     #[allow(clippy::too_many_arguments)]
     pub fn loss_and_grad(
@@ -181,8 +124,8 @@ impl Fused {
         let ad = self.act_dim;
         let bf = b as f32;
         self.grads.iter_mut().for_each(|g| *g = 0.0);
-        Self::forward(&self.params, &self.actor, self.activation, obs, b, &mut self.acts_a);
-        Self::forward(&self.params, &self.critic, self.activation, obs, b, &mut self.acts_c);
+        self.actor.forward(&self.params, obs, b, &mut self.acts_a);
+        self.critic.forward(&self.params, obs, b, &mut self.acts_c);
         let mu = self.acts_a.last().expect("output");
         let values = self.acts_c.last().expect("output");
         let ls = &self.params[self.log_std..self.log_std + ad];
@@ -249,8 +192,8 @@ impl Fused {
         for (j, g) in d_ls.iter().enumerate() {
             self.grads[self.log_std + j] += g;
         }
-        Self::backward(&self.params, &mut self.grads, &self.actor, self.activation, &self.acts_a, d_mu, b);
-        Self::backward(&self.params, &mut self.grads, &self.critic, self.activation, &self.acts_c, d_v, b);
+        self.actor.backward(&self.params, &mut self.grads, &self.acts_a, d_mu, b);
+        self.critic.backward(&self.params, &mut self.grads, &self.acts_c, d_v, b);
         stats.policy_loss /= b as f64;
         stats.value_loss /= b as f64;
         stats.approx_kl /= b as f64;
