@@ -410,7 +410,7 @@ fn fuzz_manifests(cases: u32) {
                         // Everything else that reads a manifest: the test-set bookkeeping, the
                         // tracker.
                         let _ = idrex::pipeline::test_set::Look::of(&m);
-                        let _ = idrex::exp::studies(std::slice::from_ref(&m));
+                        let _ = idrex::exp::studies(&idrex::report::Artifacts::of([m]));
                     })
                     .map_err(|e| e.to_string())
             });

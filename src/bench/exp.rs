@@ -36,7 +36,7 @@ pub fn exp_bench(args: &ExpBenchArgs) -> Result<()> {
         read.push(t.elapsed().as_secs_f64());
         let t = Instant::now();
         let m2 = store.unverified_manifests()?;
-        let table = show::table(&studies(&m2), &show::Selection::default());
+        let table = show::table(&studies(&crate::report::Artifacts::of(m2)), &show::Selection::default());
         full.push(t.elapsed().as_secs_f64());
         rows = table.rows.len();
         drop(m);

@@ -43,7 +43,7 @@ impl Output {
     fn studies(&self) -> anyhow::Result<Vec<Study>> {
         let store = super::store::existing(&self.store, false, "give --store, or run a pipeline first")?;
         let _reading = crate::log::progress::Activity::start("reading the store's manifests");
-        Ok(studies(&store.unverified_manifests()?))
+        Ok(studies(&crate::report::Artifacts::of(store.unverified_manifests()?)))
     }
 }
 

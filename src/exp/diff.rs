@@ -113,7 +113,7 @@ mod tests {
 
     #[test]
     fn two_studies_differ_in_one_parameter_and_pair_by_seeds() {
-        let all = studies(&synthetic::manifests(2, 3, 4));
+        let all = studies(&crate::report::Artifacts::of(synthetic::manifests(2, 3, 4)));
         let p = params(&all[0], &all[1]);
         assert_eq!(p.rows.len(), 1);
         assert_eq!(p.rows[0][0], Cell::text("ppo.ppo.total_steps"));

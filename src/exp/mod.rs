@@ -15,9 +15,9 @@ pub mod synthetic;
 use crate::algo::scoring::{CheckpointEval, select};
 use crate::env::EnvId;
 use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
-use crate::report::{Protocol, method_label};
+use crate::report::{Artifacts, Protocol, method_label};
 use crate::stats::{ReturnStats, bootstrap_ci, hierarchical_ci, mean};
-use crate::store::{Manifest, TestSetMark};
+use crate::store::TestSetMark;
 
 /// Resamples behind each headline interval (the report's own count).
 pub const RESAMPLES: usize = 10_000;
@@ -138,16 +138,15 @@ fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>)
     }
 }
 
-/// Every study in `manifests` (a store's, read as written), by name.
-pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
-    let by_key: BTreeMap<&str, &Manifest> = manifests.iter().map(|m| (m.key.as_str(), m)).collect();
+/// Every study in `arts` (a store's manifests, read as written), by name.
+pub fn studies(arts: &Artifacts) -> Vec<Study> {
     let mut out: BTreeMap<String, Study> = BTreeMap::new();
     let mut upstream: BTreeMap<String, BTreeSet<&str>> = BTreeMap::new();
-    for m in manifests {
+    for m in arts.iter() {
         if m.kind != StageKind::Eval.name() {
             continue;
         }
-        let Ok(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = Typed::of(m) else { continue };
+        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = arts.typed(m) else { continue };
         let s = out.entry(p.pipeline.clone()).or_insert_with(|| Study { name: p.pipeline.clone(), ..Study::default() });
         let label = method_label(p.method, p.iteration);
         s.envs.insert(p.env);
@@ -162,7 +161,7 @@ pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
         }
         let rep = s.scores.entry((p.env, label)).or_default().entry(p.replicate).or_default();
         rep.seeds.insert(m.seed);
-        rep.runs.push(Run { run: p.run, final_returns: x.summary.returns, checkpoints: x.checkpoints });
+        rep.runs.push(Run { run: p.run, final_returns: x.summary.returns.clone(), checkpoints: x.checkpoints.clone() });
         // Everything upstream of this evaluation belongs to the study's configuration.
         let seen = upstream.entry(p.pipeline.clone()).or_default();
         let mut stack = vec![m.key.as_str()];
@@ -170,14 +169,14 @@ pub fn studies(manifests: &[Manifest]) -> Vec<Study> {
             if !seen.insert(k) {
                 continue;
             }
-            if let Some(up) = by_key.get(k) {
+            if let Some(up) = arts.get(k) {
                 stack.extend(up.inputs.values().map(String::as_str));
             }
         }
     }
     for (name, keys) in upstream {
         let s = out.get_mut(&name).expect("a study per evaluation");
-        for m in keys.iter().filter_map(|k| by_key.get(k)) {
+        for m in keys.iter().filter_map(|k| arts.get(k)) {
             s.versions.insert(m.idrex_version.clone());
             s.ended = s.ended.max(m.ended_unix);
             s.config.entry(format!("{}.version", m.kind)).or_default().insert(m.version.to_string());
@@ -239,7 +238,7 @@ mod tests {
     #[test]
     fn a_study_is_its_evaluations_and_everything_upstream() {
         let manifests = synthetic::manifests(2, 3, 7);
-        let all = studies(&manifests);
+        let all = studies(&Artifacts::of(manifests));
         assert_eq!(all.len(), 2);
         let s = &all[0];
         assert_eq!((s.replicates.len(), s.runs), (3, 3 * (1 + 2 * 2)));

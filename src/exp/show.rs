@@ -122,7 +122,7 @@ mod tests {
 
     #[test]
     fn one_row_per_study_with_what_sets_it_apart() {
-        let all = studies(&synthetic::manifests(3, 2, 1));
+        let all = studies(&crate::report::Artifacts::of(synthetic::manifests(3, 2, 1)));
         let t = table(&all, &Selection::default());
         assert_eq!(t.rows.len(), 3);
         assert!(t.columns.contains(&"ppo.ppo.total_steps".to_string()), "{:?}", t.columns);

@@ -75,8 +75,9 @@ struct TableId {
 #[derive(Default)]
 pub struct Artifacts {
     by_key: BTreeMap<String, Manifest>,
-    /// Each manifest read once through its stage's types (those that parse).
-    typed: BTreeMap<String, Typed>,
+    /// Each manifest read through its stage's types once, when first asked for (`exp` reads
+    /// the evaluations and little else).
+    typed: BTreeMap<String, std::sync::OnceLock<Option<Typed>>>,
     /// Keys known from an archive alone: no outputs on this machine.
     archived: std::collections::BTreeSet<String>,
 }
@@ -103,26 +104,30 @@ impl Artifacts {
         Ok(added)
     }
 
-    /// Reads the manifests not typed yet through their stages' types, once; an evaluation
-    /// that does not parse (an older idrex's) is left out of every table with a warning.
+    /// A slot to type each manifest not known yet in.
     fn type_new(&mut self) {
-        for (key, m) in &self.by_key {
-            if self.typed.contains_key(key) {
-                continue;
-            }
-            match Typed::of(m) {
-                Ok(t) => {
-                    self.typed.insert(key.clone(), t);
-                }
-                Err(e) if m.kind == StageKind::Eval.name() => tracing::warn!("skipping {key}: {e}"),
-                Err(e) => tracing::debug!("{key} ({}): {e}", m.kind),
-            }
+        for key in self.by_key.keys() {
+            self.typed.entry(key.clone()).or_default();
         }
     }
 
     /// `m` read through its stage's types, if it parses.
+    /// An evaluation that does not parse (an older idrex's) is left out of every table, with
+    /// a warning the first time.
     pub fn typed(&self, m: &Manifest) -> Option<&Typed> {
-        self.typed.get(&m.key)
+        let slot = self.typed.get(&m.key)?;
+        slot.get_or_init(|| match Typed::of(m) {
+            Ok(t) => Some(t),
+            Err(e) if m.kind == StageKind::Eval.name() => {
+                tracing::warn!("skipping {}: {e}", m.key);
+                None
+            }
+            Err(e) => {
+                tracing::debug!("{} ({}): {e}", m.key, m.kind);
+                None
+            }
+        })
+        .as_ref()
     }
 
     /// Whether `key` is known from an archive only (its outputs are not on this machine).
