@@ -87,7 +87,7 @@ impl Artifacts {
         Ok(Self::of(store.manifests()?))
     }
 
-    /// These manifests, each read through its stage's types once.
+    /// These manifests; each is read through its stage's types once, when first asked for.
     pub fn of(manifests: impl IntoIterator<Item = Manifest>) -> Self {
         let mut a = Artifacts { by_key: manifests.into_iter().map(|m| (m.key.clone(), m)).collect(), ..Default::default() };
         a.type_new();
@@ -111,9 +111,8 @@ impl Artifacts {
         }
     }
 
-    /// `m` read through its stage's types, if it parses.
-    /// An evaluation that does not parse (an older idrex's) is left out of every table, with
-    /// a warning the first time.
+    /// `m` read through its stage's types, if it parses; an evaluation that does not (an
+    /// older idrex's) is left out of every table, with a warning the first time.
     pub fn typed(&self, m: &Manifest) -> Option<&Typed> {
         let slot = self.typed.get(&m.key)?;
         slot.get_or_init(|| match Typed::of(m) {
