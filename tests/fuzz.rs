@@ -409,8 +409,9 @@ fn fuzz_manifests(cases: u32) {
                     .map(|(m, _)| {
                         // Everything else that reads a manifest: the test-set bookkeeping, the
                         // tracker.
-                        let _ = idrex::pipeline::test_set::Look::of(&m);
-                        let _ = idrex::exp::studies(&idrex::report::Artifacts::of([m]));
+                        let arts = idrex::report::Artifacts::of([m]);
+                        let _ = arts.looks();
+                        let _ = idrex::exp::studies(&arts);
                     })
                     .map_err(|e| e.to_string())
             });

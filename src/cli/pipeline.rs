@@ -366,12 +366,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     for a in &args.archive {
         archived.extend(crate::store::archive::read(a, stage::recorded_key)?.into_iter().filter(|m| !present.contains(m.key.as_str())));
     }
-    // The store's manifests are copied only when archives join them.
-    let looks = if archived.is_empty() {
-        crate::pipeline::test_set::Looks::new(&manifests)
-    } else {
-        crate::pipeline::test_set::Looks::new(&[manifests.clone(), archived].concat())
-    };
+    let looks = crate::report::Artifacts::of(manifests.iter().cloned().chain(archived)).looks();
     let test_set = crate::pipeline::test_set::check(p, &g, &looks, &|k| present.contains(k), args.reuse_test_set)?;
     if args.executor == Executor::Slurm {
         return submit(args, p, &store, &g, test_set.as_ref());

@@ -14,7 +14,7 @@ pub mod synthetic;
 
 use crate::algo::scoring::{CheckpointEval, select};
 use crate::env::EnvId;
-use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
+use crate::pipeline::stage::StageKind;
 use crate::report::{Artifacts, Protocol, method_label};
 use crate::stats::{ReturnStats, bootstrap_ci, hierarchical_ci, mean};
 use crate::store::TestSetMark;
@@ -142,11 +142,7 @@ fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, String)>)
 pub fn studies(arts: &Artifacts) -> Vec<Study> {
     let mut out: BTreeMap<String, Study> = BTreeMap::new();
     let mut upstream: BTreeMap<String, BTreeSet<&str>> = BTreeMap::new();
-    for m in arts.iter() {
-        if m.kind != StageKind::Eval.name() {
-            continue;
-        }
-        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = arts.typed(m) else { continue };
+    for (m, p, x) in arts.evaluations() {
         let s = out.entry(p.pipeline.clone()).or_insert_with(|| Study { name: p.pipeline.clone(), ..Study::default() });
         let label = method_label(p.method, p.iteration);
         s.envs.insert(p.env);

@@ -8,7 +8,8 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use super::config::Purpose;
 use super::graph::Graph;
-use super::stage::{EvalInputs, Inputs, Params, StageKind};
+use super::stage::eval::EvalParams;
+use super::stage::{EvalInputs, Inputs, Params};
 use super::{Method, Pipeline};
 use crate::env::EnvId;
 use crate::error::{Error, Result};
@@ -29,18 +30,15 @@ pub struct Look {
 }
 
 impl Look {
-    pub fn of(m: &Manifest) -> Option<Look> {
-        if m.kind != StageKind::Eval.name() {
-            return None;
-        }
-        let Ok(Params::Eval(p)) = Params::from_json(StageKind::Eval, &m.params) else { return None };
+    /// The evaluation `m`, whose parameters are `p`.
+    pub fn of(m: &Manifest, p: &EvalParams) -> Option<Look> {
         Some(Look {
             env: p.env,
             seed: m.seed,
             method: p.method,
             iteration: p.iteration,
             policy: super::role::recorded_input(m, super::role::Role::Policy)?.clone(),
-            study: p.pipeline,
+            study: p.pipeline.clone(),
             mark: m.test_set.clone(),
         })
     }
@@ -52,12 +50,17 @@ pub struct Looks {
 }
 
 impl Looks {
-    pub fn new(manifests: &[Manifest]) -> Looks {
+    pub fn new(looks: impl IntoIterator<Item = Look>) -> Looks {
         let mut at: BTreeMap<(EnvId, u64), Vec<Look>> = BTreeMap::new();
-        for l in manifests.iter().filter_map(Look::of) {
+        for l in looks {
             at.entry((l.env, l.seed)).or_default().push(l);
         }
         Looks { at }
+    }
+
+    /// Every (env, study) with a stored evaluation.
+    pub fn studies(&self) -> BTreeSet<(EnvId, &str)> {
+        self.at.values().flatten().map(|l| (l.env, l.study.as_str())).collect()
     }
 
     /// How many configurations were evaluated on `study`'s seeds in `env`: per seed and
@@ -140,6 +143,7 @@ pub fn check(p: &Pipeline, g: &Graph, looks: &Looks, stored: &dyn Fn(&str) -> bo
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::stage::StageKind;
 
     const BASE: &str = "version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nnoise:\n  schedule: [0.0, 0.5, 1.0]\n";
 
@@ -171,6 +175,15 @@ mod tests {
             .collect()
     }
 
+    /// The looks of these evaluations' manifests.
+    fn looks_of(evals: &[Manifest]) -> Looks {
+        let params = |m: &Manifest| match Params::from_json(StageKind::Eval, &m.params).unwrap() {
+            Params::Eval(p) => p,
+            _ => unreachable!("an evaluation's parameters"),
+        };
+        Looks::new(evals.iter().map(|m| Look::of(m, &params(m)).unwrap()))
+    }
+
     fn check_text(text: &str, looks: &Looks, stored: &[Manifest], reuse: bool) -> Result<Option<TestSetMark>> {
         let p = Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap();
         let g = super::super::expand(&p).unwrap();
@@ -184,10 +197,10 @@ mod tests {
         let other = format!("{BASE}name: other\nreward:\n  ceiling: 0.9\n");
         let elsewhere = other.replace("seeds: [0, 1]", "seeds: [7, 8]");
         // A fresh test set is marked as one.
-        let empty = Looks::new(&[]);
+        let empty = Looks::new([]);
         assert_eq!(check_text(&test, &empty, &[], false).unwrap(), Some(TestSetMark::Test { study: "locked".into() }));
         let evals = stored_evals(&test, Some(TestSetMark::Test { study: "locked".into() }));
-        let looks = Looks::new(&evals);
+        let looks = looks_of(&evals);
         assert_eq!(looks.configurations(EnvId::Hopper, "locked"), 1);
         // Running it again, or raising nothing, is no second look.
         assert!(check_text(&test, &looks, &evals, false).is_ok());
@@ -200,11 +213,11 @@ mod tests {
         // The store counts the second configuration once it is there.
         let mut both = evals.clone();
         both.extend(stored_evals(&other, Some(TestSetMark::Reuse { study: "locked".into() })));
-        let looks = Looks::new(&both);
+        let looks = looks_of(&both);
         assert_eq!((looks.configurations(EnvId::Hopper, "locked"), looks.configurations(EnvId::Hopper, "other")), (2, 2));
         assert!(matches!(looks.mark(EnvId::Hopper, "other"), Some(TestSetMark::Reuse { .. })));
         // A test set cannot take seeds another configuration used first.
-        let used = Looks::new(&stored_evals(&other, None));
+        let used = looks_of(&stored_evals(&other, None));
         let e = check_text(&test, &used, &[], false).unwrap_err().to_string();
         assert!(e.contains("role: test") && e.contains("study `other`"), "{e}");
     }
@@ -214,7 +227,7 @@ mod tests {
     #[test]
     fn a_sweep_on_a_test_sets_seeds_is_refused() {
         let test = format!("{BASE}name: locked\nrole: test\n");
-        let looks = Looks::new(&stored_evals(&test, Some(TestSetMark::Test { study: "locked".into() })));
+        let looks = looks_of(&stored_evals(&test, Some(TestSetMark::Test { study: "locked".into() })));
         let path = std::path::Path::new("p.yaml");
         let sweep = super::super::Sweep::parse(path, &format!("{BASE}name: tune\n"), &["reward.ceiling=0.5,none".into()]).unwrap();
         let e = check(&sweep.file, &sweep.graph().unwrap(), &looks, &|_| false, false).unwrap_err().to_string();

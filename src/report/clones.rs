@@ -9,7 +9,7 @@ use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
 use crate::pipeline::stage::idrex::clone::CloneRecord;
-use crate::pipeline::stage::{Metrics, Params, Typed};
+use crate::pipeline::stage::{Metrics, Typed};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct CloneRow {
@@ -42,8 +42,7 @@ impl CloneRow {
 pub fn rows(store: &Artifacts) -> Vec<CloneRow> {
     let mut seen = BTreeSet::new();
     let mut out = Vec::new();
-    for m in store.iter() {
-        let Some(Typed { params: Params::Eval(p), .. }) = store.typed(m) else { continue };
+    for (m, p, _) in store.evaluations() {
         if p.method != Method::IdrexMultiBc {
             continue;
         }

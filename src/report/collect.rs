@@ -80,10 +80,8 @@ struct Gathered {
 pub(super) fn collect(store: &Artifacts) -> Result<Long> {
     let ssrr = terms::ssrr_pearson(store);
     let mut g = Gathered::default();
-    for m in store.iter().filter(|m| m.kind == crate::pipeline::stage::StageKind::Eval.name()) {
-        if let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = store.typed(m) {
-            g.add(store, &ssrr, m, p, x)?;
-        }
+    for (m, p, x) in store.evaluations() {
+        g.add(store, &ssrr, m, p, x)?;
     }
     if let Some(((e, study), sources)) = g.demo_sources.iter().find(|(_, s)| s.len() > 1) {
         let sources: Vec<&str> = sources.iter().map(String::as_str).collect();

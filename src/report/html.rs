@@ -123,13 +123,11 @@ pub struct Links {
 /// objects are named by digest, so there is no file to link to; an archived result has none
 /// on this machine).
 pub fn rollout_links(artifacts: &super::Artifacts, store: Option<&crate::store::Store>) -> Vec<(String, String)> {
-    use crate::pipeline::stage::{Params, Typed};
     let Some(store) = store.filter(|s| s.url().is_none()) else { return Vec::new() };
     let mut out: Vec<(String, String)> = artifacts
-        .iter()
-        .filter(|m| !artifacts.is_archived(&m.key))
-        .filter_map(|m| {
-            let Some(Typed { params: Params::Eval(p), .. }) = artifacts.typed(m) else { return None };
+        .evaluations()
+        .filter(|(m, _, _)| !artifacts.is_archived(&m.key))
+        .filter_map(|(m, p, _)| {
             let file = m.outputs.iter().find(|o| o.path.ends_with(".mcap"))?;
             let at = store.dir(&m.key).join(&file.path);
             let at = std::fs::canonicalize(&at).unwrap_or(at);

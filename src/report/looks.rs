@@ -1,12 +1,9 @@
 //! How often each study's seeds were looked at: per environment and study, how many
 //! configurations the store evaluated on the same seeds, and whether the study is a locked
 //! test set or reused one ([`crate::pipeline::test_set`]).
-use std::collections::BTreeSet;
-
 use super::Artifacts;
 use crate::log::table::{Cell, Row, Table};
-use crate::pipeline::test_set::{Look, Looks};
-use crate::store::{Manifest, TestSetMark};
+use crate::store::TestSetMark;
 
 /// One (env, study).
 #[derive(Debug, Clone, PartialEq)]
@@ -34,19 +31,20 @@ impl LookRow {
 }
 
 pub fn rows(store: &Artifacts) -> Vec<LookRow> {
-    let manifests: Vec<Manifest> = store.iter().cloned().collect();
-    let looks = Looks::new(&manifests);
-    let studies: BTreeSet<(String, crate::env::EnvId, String)> =
-        manifests.iter().filter_map(Look::of).map(|l| (l.env.name().to_string(), l.env, l.study)).collect();
-    studies
+    let looks = store.looks();
+    let mut rows: Vec<LookRow> = looks
+        .studies()
         .into_iter()
-        .map(|(name, env, study)| LookRow {
-            configurations: looks.configurations(env, &study),
-            mark: looks.mark(env, &study).cloned(),
-            env: name,
-            study,
+        .map(|(env, study)| LookRow {
+            env: env.name().to_string(),
+            study: study.to_string(),
+            configurations: looks.configurations(env, study),
+            mark: looks.mark(env, study).cloned(),
         })
-        .collect()
+        .collect();
+    // By the environment's name, as the tables are.
+    rows.sort_by(|a, b| (&a.env, &a.study).cmp(&(&b.env, &b.study)));
+    rows
 }
 
 pub fn markdown(rows: &[LookRow]) -> String {

@@ -32,7 +32,9 @@ use crate::error::{Error, Result};
 use crate::log::table::Table;
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
-use crate::pipeline::stage::{StageKind, Typed};
+use crate::pipeline::stage::eval::{EvalMetrics, EvalParams};
+use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
+use crate::pipeline::test_set::{Look, Looks};
 use crate::store::{Manifest, Store};
 use columns::Col;
 
@@ -127,6 +129,21 @@ impl Artifacts {
             }
         })
         .as_ref()
+    }
+
+    /// Every evaluation that reads through its types, with its parameters and metrics (the
+    /// other kinds' manifests are not typed for it).
+    pub fn evaluations(&self) -> impl Iterator<Item = (&Manifest, &EvalParams, &EvalMetrics)> {
+        self.iter().filter(|m| m.kind == StageKind::Eval.name()).filter_map(|m| match self.typed(m)? {
+            Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) } => Some((m, p, x)),
+            _ => None,
+        })
+    }
+
+    /// Which configurations the store scored on which seeds: what the test-set check and the
+    /// report's `looks` read.
+    pub fn looks(&self) -> Looks {
+        Looks::new(self.evaluations().filter_map(|(m, p, _)| Look::of(m, p)))
     }
 
     /// Whether `key` is known from an archive only (its outputs are not on this machine).

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use super::Artifacts;
 use crate::error::Result;
 use crate::pipeline::role::{Role, Series};
-use crate::pipeline::stage::{Metrics, Params, Typed};
+use crate::pipeline::stage::{Metrics, Typed};
 
 /// Per (env, pipeline), what the tables do not show: each learned reward's validation pair
 /// accuracy, and what multi-BC's clone filter kept (when it keeps none, multi-BC's reward is
@@ -13,8 +13,7 @@ use crate::pipeline::stage::{Metrics, Params, Typed};
 pub fn notes(store: &Artifacts) -> Result<String> {
     let mut lines: BTreeMap<(String, String), std::collections::BTreeSet<String>> = BTreeMap::new();
     let mut seen = std::collections::BTreeSet::new();
-    for m in store.iter() {
-        let Some(Typed { params: Params::Eval(p), .. }) = store.typed(m) else { continue };
+    for (m, p, _) in store.evaluations() {
         let Some(reward) = super::input_key(m, Role::Reward) else { continue };
         if !seen.insert((p.pipeline.clone(), reward.clone())) {
             continue;

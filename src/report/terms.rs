@@ -11,7 +11,7 @@ use crate::env::EnvId;
 use crate::log::table::{Cell, Row};
 use crate::nn::RewardEnsemble;
 use crate::pipeline::role::{Role, Series};
-use crate::pipeline::stage::{EpisodeTerms, Metrics, Params, REWARD, RolloutSummary, StageKind, Typed, read_rollouts};
+use crate::pipeline::stage::{EpisodeTerms, Metrics, REWARD, RolloutSummary, Typed, read_rollouts};
 use crate::stats::pearson;
 use crate::store::{Manifest, Store};
 
@@ -96,8 +96,7 @@ pub fn rows(arts: &Artifacts, store: Option<&Store>) -> Vec<TermRow> {
     let mut ranked: BTreeMap<String, Option<(f64, f64)>> = BTreeMap::new();
     let mut groups: BTreeMap<(EnvId, String, String), Sums> = BTreeMap::new();
     let mut demos_seen = std::collections::BTreeSet::new();
-    for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
-        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = arts.typed(m) else { continue };
+    for (m, p, x) in arts.evaluations() {
         // The demonstrations the table compares with, once per table: idrex's own only (an
         // imported file's terms are not known).
         if let Some(dk) = super::input_key(m, Role::Demos)
@@ -213,8 +212,8 @@ fn reward_of(m: &Manifest) -> Option<&String> {
 /// these are the final policies'.
 pub fn ssrr_pearson(arts: &Artifacts) -> BTreeMap<(String, String), f64> {
     let mut unseen: BTreeMap<(String, String), (Vec<f64>, Vec<f64>)> = BTreeMap::new();
-    for m in arts.iter().filter(|m| m.kind == StageKind::Eval.name()) {
-        let (Some(k), Some(Typed { params: Params::Eval(e), metrics: Metrics::Eval(x) })) = (reward_of(m), arts.typed(m)) else { continue };
+    for (m, e, x) in arts.evaluations() {
+        let Some(k) = reward_of(m) else { continue };
         if let Some(acc) = &x.reward {
             let (p, t) = unseen.entry((k.clone(), e.table())).or_default();
             p.extend(&acc.predicted_returns);

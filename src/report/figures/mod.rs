@@ -28,7 +28,7 @@ use super::{Protocol, ProtocolRow};
 use crate::error::{Error, Result};
 use crate::pipeline::Method;
 use crate::pipeline::role::{Role, Series};
-use crate::pipeline::stage::{DegradationLevel, Metrics, Params, Typed};
+use crate::pipeline::stage::{DegradationLevel, Metrics, Typed};
 use crate::stats::pearson;
 use crate::store::Manifest;
 use runs::{Curve, Degradation, FinalBars, PpoCurves, RewardScatter, Runs};
@@ -235,11 +235,7 @@ pub fn write(
 /// rewards and ranked sets behind them.
 fn groups(store: &Artifacts) -> BTreeMap<(String, String), Group> {
     let mut groups: BTreeMap<(String, String), Group> = BTreeMap::new();
-    for m in store.iter() {
-        if m.kind != crate::pipeline::stage::StageKind::Eval.name() {
-            continue;
-        }
-        let Some(Typed { params: Params::Eval(p), metrics: Metrics::Eval(x) }) = store.typed(m) else { continue };
+    for (m, p, x) in store.evaluations() {
         let g = groups.entry((p.env.name().to_string(), p.table())).or_default();
         g.replicate = p.replicate;
         if g.demos.is_none()
