@@ -65,10 +65,19 @@ impl Adam {
         AdamStep { step: lr / (1.0 - B1.powi(self.t)), bc2s: (1.0 - B2.powi(self.t)).sqrt(), eps }
     }
 
-    /// One step on every parameter from `grads` times `scale` (PPO's clipped gradient).
-    pub fn step_scaled(&mut self, params: &mut [f32], grads: &[f32], scale: f32, lr: f32, eps: f32) {
+    /// One step on every parameter from `grads` times `scale` (PPO's clipped gradient);
+    /// `parts` hold the parameters in the gradient's order (PPO's actor, critic, log-std).
+    pub fn step_scaled<const N: usize>(&mut self, parts: [&mut [f32]; N], grads: &[f32], scale: f32, lr: f32, eps: f32) {
+        assert_eq!(parts.iter().map(|p| p.len()).sum::<usize>(), grads.len(), "a gradient for every parameter");
         let k = self.advance(lr, eps);
-        update_scaled(params, grads, scale, &mut self.m, &mut self.v, k);
+        let (mut m, mut v, mut g) = (&mut self.m[..], &mut self.v[..], grads);
+        for p in parts {
+            let n = p.len();
+            let (mh, mt) = std::mem::take(&mut m).split_at_mut(n);
+            let (vh, vt) = std::mem::take(&mut v).split_at_mut(n);
+            update_scaled(p, &g[..n], scale, mh, vh, k);
+            (m, v, g) = (mt, vt, &g[n..]);
+        }
     }
 
     /// The moments, to split with the parameters into the lanes' shares of a step.

@@ -1,13 +1,14 @@
-//! Every MLP computed on the CPU: training of ReLU MLPs (the BC policy, the T-REX reward nets)
-//! with explicit forward and backward passes over idrex's own matrix product
+//! Every MLP computed on the CPU: training of the BC policy, the T-REX reward nets and PPO's
+//! actor and critic with explicit forward and backward passes over idrex's own matrix product
 //! ([`crate::kernels::gemm`]), inference of those networks in batches (the learned reward in
 //! PPO, evaluation and multi-BC), and a policy's actions one row at a time in rollouts.
 //!
 //! Why not autograd: at these shapes (256 units, batches of 128 rows for BC and 6,400 for
-//! T-REX) libtorch spends a third to a half of each step outside its matrix products, in
-//! per-operator dispatch, allocation and passes over activations too large for the cache.
-//! Here every product goes straight to the kernel, activations live in reused 64-byte-aligned
-//! buffers, and callers feed batches in chunks of a few hundred rows, which stay in L2.
+//! T-REX; 64 units and minibatches of 64 for PPO) libtorch spends a third to a half of each
+//! step (for PPO, most of it) outside its matrix products, in per-operator dispatch,
+//! allocation and passes over activations too large for the cache. Here every product goes
+//! straight to the kernel, activations live in reused 64-byte-aligned buffers, and callers
+//! feed batches in chunks of a few hundred rows, which stay in L2.
 //!
 //! Results are the same bits on every processor and thread count: the products and the
 //! elementwise passes sum in an order fixed by the shapes; training ([`super::trainer`])
@@ -22,8 +23,7 @@ use crate::kernels::gemm::{Factor, Product, gemm};
 use crate::kernels::{Buf, transpose_rows, vectorised};
 
 /// One linear layer of an MLP held as a flat vector of parameters, libtorch's layout: the
-/// `out x in` row-major weight at `w`, then the bias. BC's and T-REX's networks ([`Dense`])
-/// and PPO's actor and critic ([`crate::algo::ppo`]) index their parameters by it.
+/// `out x in` row-major weight at `w`, then the bias.
 #[derive(Debug, Clone, Copy)]
 pub struct Layer {
     pub w: usize,
@@ -48,15 +48,30 @@ impl Layer {
     }
 }
 
+/// Where a layer's bias enters the sum of its products. The two orders round differently,
+/// and each trainer's stored bytes come from one: BC's and T-REX's from [`BiasOrder::Last`]
+/// (and the learned reward's batches), PPO's from [`BiasOrder::First`] (and every policy's
+/// actions one row at a time, [`Dense::forward_row`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BiasOrder {
+    /// Each output starts from the bias and adds the products to it.
+    First,
+    /// The products are summed, then the bias is added.
+    Last,
+}
+
 /// An MLP (the activation after every layer but the last) as one flat vector of parameters,
 /// laid out as libtorch's Linear layers: per layer the `out x in` weight, then the bias. What
-/// computes every network on the CPU: BC's and T-REX's training and the learned reward's
-/// batches ([`Dense::forward`], [`Dense::backward`], [`Dense::predict`]; ReLU networks), and a
-/// policy's actions one observation at a time in rollouts ([`Dense::forward_row`]).
+/// computes every network on the CPU: the training of BC, T-REX and PPO's actor and critic
+/// ([`Dense::forward`], [`Dense::backward`]), the learned reward's batches
+/// ([`Dense::predict`]), and a policy's actions one observation at a time in rollouts
+/// ([`Dense::forward_row`]).
 #[derive(Clone)]
 pub struct Dense {
     pub(super) layers: Vec<Layer>,
     activation: Activation,
+    /// The batched passes' order ([`Dense::forward`]); [`Dense::forward_row`] starts from the bias.
+    bias: BiasOrder,
     pub params: Buf,
     /// Each layer's weight transposed (`in x out`, at the weight's offset), which the forward
     /// pass reads in place; [`Dense::refresh`] rewrites it after the parameters change.
@@ -89,7 +104,7 @@ impl Dense {
         let mut buf = Buf::zeros(params.len());
         buf.copy_from_slice(&params);
         let (activation, wt) = (mlp.activation(), Buf::zeros(params.len()));
-        let mut dense = Dense { layers, activation, params: buf, wt, precision: Precision::F32 };
+        let mut dense = Dense { layers, activation, bias: BiasOrder::Last, params: buf, wt, precision: Precision::F32 };
         dense.refresh();
         dense
     }
@@ -97,6 +112,11 @@ impl Dense {
     /// The same network computing its products at `precision`.
     pub fn with_precision(self, precision: Precision) -> Self {
         Dense { precision, ..self }
+    }
+
+    /// The same network with its batched passes summing in `bias` order.
+    pub fn with_bias_order(self, bias: BiasOrder) -> Self {
+        Dense { bias, ..self }
     }
 
     /// One product of the passes, at the network's precision.
@@ -166,7 +186,6 @@ impl Dense {
 
     /// The outputs (`rows x out`) of `x` (`rows x in`), kept in `s` for [`Dense::backward`].
     pub fn forward<'s>(&self, x: &[f32], rows: usize, s: &'s mut Scratch) -> &'s [f32] {
-        assert_eq!(self.activation, Activation::Relu, "the batched passes compute ReLU networks");
         s.acts.resize_with(self.layers.len(), Buf::default);
         let last = self.layers.len() - 1;
         for (i, l) in self.layers.iter().enumerate() {
@@ -174,16 +193,29 @@ impl Dense {
             let input: &[f32] = if i == 0 { x } else { &done[i - 1] };
             let y = &mut rest[0];
             y.resize(rows * l.out);
+            let bias = &self.params[l.bias()];
+            if self.bias == BiasOrder::First {
+                y.chunks_exact_mut(l.out).for_each(|row| row.copy_from_slice(bias));
+            }
             let p = Product {
                 m: rows,
                 n: l.out,
                 k: l.inp,
                 a: Factor::new(input, l.inp),
-                b: Factor::new(&self.wt[l.w..l.b()], l.out),
-                accumulate: false,
+                b: Factor::new(&self.wt[l.weight()], l.out),
+                accumulate: self.bias == BiasOrder::First,
             };
             self.gemm(p, y, l.out);
-            add_bias(y, &self.params[l.b()..l.b() + l.out], i < last);
+            let activate = i < last;
+            match (self.bias, self.activation) {
+                // The sum and the ReLU in one pass.
+                (BiasOrder::Last, Activation::Relu) => add_bias(y, bias, activate),
+                (BiasOrder::Last, Activation::Tanh) => add_bias(y, bias, false),
+                (BiasOrder::First, _) => {}
+            }
+            if activate && (self.bias, self.activation) != (BiasOrder::Last, Activation::Relu) {
+                super::activate(y, self.activation);
+            }
         }
         &s.acts[last][..rows * self.output_dim()]
     }
@@ -227,7 +259,11 @@ impl Dense {
                 };
                 self.gemm(p, dprev, l.inp);
                 let below = self.layers[i - 1];
-                relu_backward(dprev, input, &mut grads[below.b()..below.b() + below.out]);
+                let db = &mut grads[below.bias()];
+                match self.activation {
+                    Activation::Relu => relu_backward(dprev, input, db),
+                    Activation::Tanh => tanh_backward(dprev, input, db),
+                }
                 std::mem::swap(d, dprev);
             }
         }
@@ -245,81 +281,6 @@ impl Dense {
     /// The sum of squared weights (not biases).
     pub fn weight_l2(&self) -> f64 {
         self.layers.iter().flat_map(|l| &self.params[l.w..l.b()]).map(|&w| (w as f64) * (w as f64)).sum()
-    }
-}
-
-/// An MLP whose parameters sit in a vector it shares: PPO's actor, critic and log-std live in
-/// one vector, so that one Adam step and one gradient norm cover them ([`crate::algo::ppo`]).
-/// Its layers index that vector as [`Dense`]'s index its own; its passes read the weights
-/// untransposed and start each row from the bias, the order PPO's stored bytes come from
-/// ([`Dense`] adds the bias last).
-#[derive(Debug, Clone)]
-pub struct SharedDense {
-    pub layers: Vec<Layer>,
-    pub activation: Activation,
-}
-
-impl SharedDense {
-    pub fn output_dim(&self) -> usize {
-        self.layers.last().expect("an MLP has layers").out
-    }
-
-    /// `acts[0] = x`, `acts[l + 1]` = output of layer l: each row starts from the bias and
-    /// adds `x W^T` through idrex's matrix product ([`crate::kernels::gemm`]: the same bits on
-    /// every processor).
-    pub fn forward(&self, params: &[f32], x: &[f32], b: usize, acts: &mut Vec<Vec<f32>>) {
-        let (layers, act) = (&self.layers[..], self.activation);
-        acts.resize(layers.len() + 1, Vec::new());
-        acts[0].clear();
-        acts[0].extend_from_slice(x);
-        for (l, ly) in layers.iter().enumerate() {
-            let (input, rest) = acts.split_at_mut(l + 1);
-            let (xin, y) = (&input[l], &mut rest[0]);
-            y.resize(b * ly.out, 0.0);
-            let bias = &params[ly.bias()];
-            y.chunks_exact_mut(ly.out).for_each(|row| row.copy_from_slice(bias));
-            let w = &params[ly.weight()];
-            gemm(Product { m: b, n: ly.out, k: ly.inp, a: Factor::new(xin, ly.inp), b: Factor::t(w, ly.inp), accumulate: true }, y, ly.out);
-            if l + 1 < layers.len() {
-                super::activate(y, act);
-            }
-        }
-    }
-
-    /// Adds the gradient of every layer's parameters, given the gradient `d` with respect to
-    /// the last layer's outputs: per layer `dW += d^T x`, `db +=` the column sums of `d`, and
-    /// `d x W` passed down through the activation.
-    pub fn backward(&self, params: &[f32], grads: &mut [f32], acts: &[Vec<f32>], mut d: Vec<f32>, b: usize) {
-        let (layers, act) = (&self.layers[..], self.activation);
-        for l in (0..layers.len()).rev() {
-            let ly = layers[l];
-            if l + 1 < layers.len() {
-                for (dv, y) in d.iter_mut().zip(&acts[l + 1]) {
-                    *dv *= match act {
-                        Activation::Tanh => 1.0 - y * y,
-                        Activation::Relu => f32::from(*y > 0.0),
-                    };
-                }
-            }
-            for row in d.chunks_exact(ly.out) {
-                grads[ly.bias()].iter_mut().zip(row).for_each(|(g, v)| *g += v);
-            }
-            let p = Product { m: ly.out, n: ly.inp, k: b, a: Factor::t(&d, ly.out), b: Factor::new(&acts[l], ly.inp), accumulate: true };
-            gemm(p, &mut grads[ly.weight()], ly.inp);
-            if l > 0 {
-                let mut dx = vec![0.0f32; b * ly.inp];
-                let p = Product {
-                    m: b,
-                    n: ly.inp,
-                    k: ly.out,
-                    a: Factor::new(&d, ly.out),
-                    b: Factor::new(&params[ly.weight()], ly.inp),
-                    accumulate: false,
-                };
-                gemm(p, &mut dx, ly.inp);
-                d = dx;
-            }
-        }
     }
 }
 
@@ -374,6 +335,19 @@ vectorised! {
                 let v = if hv > 0.0 { *gv } else { 0.0 };
                 *gv = v;
                 *s += v;
+            }
+        }
+    }
+}
+
+vectorised! {
+    /// Through a tanh whose outputs were `h`: `g` times `1 - h^2`, and its column sums (the
+    /// layer's bias gradient) added to `db`.
+    fn tanh_backward(g: &mut [f32], h: &[f32], db: &mut [f32]) {
+        for (grow, hrow) in g.chunks_exact_mut(db.len()).zip(h.chunks_exact(db.len())) {
+            for ((gv, &hv), s) in grow.iter_mut().zip(hrow).zip(db.iter_mut()) {
+                *gv *= 1.0 - hv * hv;
+                *s += *gv;
             }
         }
     }

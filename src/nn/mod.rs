@@ -2,9 +2,11 @@
 //! ([`mlp`]), the Gaussian actor-critic ([`policy`]), the T-REX reward nets and ensembles
 //! ([`reward`]), saved as safetensors with a JSON sidecar ([`sidecar`]). What computes on the
 //! CPU is idrex's own code, the same bits on every processor: initial weights ([`init`]),
-//! the matrix products ([`crate::kernels::gemm`], [`crate::kernels::bf16`]), training and batch inference of ReLU MLPs
-//! ([`dense`], [`trainer`]; Adam in [`adam`]) and per-step inference in rollouts ([`dense`]). [`device`] picks
-//! libtorch's GPU where asked.
+//! the matrix products ([`crate::kernels::gemm`], [`crate::kernels::bf16`]), and one MLP,
+//! [`Dense`] ([`dense`]; a libtorch [`Mlp`]'s parameters, [`Mlp::to_cpu`]), for every pass:
+//! BC's, T-REX's and PPO's training (with [`trainer`]'s lanes for BC and T-REX, Adam in
+//! [`adam`]), batch inference of the learned reward and per-step inference in rollouts.
+//! [`device`] picks libtorch's GPU where asked.
 
 use crate::kernels::vectorised;
 

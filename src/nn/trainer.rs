@@ -222,7 +222,7 @@ mod tests {
                 let mut grads = g0.clone();
                 add_into(&mut grads, &g1);
                 want.add_weight_l2(0.01, &mut grads);
-                adam.step_scaled(&mut want.params, &grads, 1.0, 1e-2, EPS);
+                adam.step_scaled([&mut want.params[..]], &grads, 1.0, 1e-2, EPS);
                 want.refresh();
                 trainer.step([&g0[..], &g1[..]]);
                 assert_eq!(bits(&trainer.net.params), bits(&want.params), "threads {threads}, step {t}: parameters");
@@ -257,7 +257,7 @@ mod tests {
             dense.forward(&xs, 6, &mut s);
             let mut grads = vec![0.0; dense.len()];
             dense.backward(&xs, 6, &[1.0; 6], &mut s, &mut grads);
-            adam.step_scaled(&mut dense.params, &grads, 1.0, 1e-2, EPS);
+            adam.step_scaled([&mut dense.params[..]], &grads, 1.0, 1e-2, EPS);
             dense.refresh();
         }
         let after = Dense::from_mlp(&mlp);

@@ -1,6 +1,6 @@
 //! PPO's minibatch update (losses, backward pass, gradient-norm clipping, Adam) written out
 //! in plain Rust for the small actor-critic MLPs PPO uses on MuJoCo: the loss here, the
-//! networks' passes in [`crate::nn::dense::SharedDense`], the step in [`crate::nn::adam`].
+//! networks' passes in [`crate::nn::Dense`], the step in [`crate::nn::adam`].
 //!
 //! Why: a 64-64 network on a minibatch of 64 is a few hundred thousand multiply-adds, far
 //! less than libtorch's per-operator overhead; with autograd each of the 320 gradient steps
@@ -8,11 +8,9 @@
 //! VarStore (initialisation, saving, the `tch` backend): [`Fused::from_agent`] reads them
 //! and [`Fused::write_to`] writes them back. `tests::matches_libtorch_autograd` checks the
 //! loss and every gradient against libtorch's autograd of the same loss.
-use std::collections::HashMap;
-
-use crate::nn::ActorCritic;
 use crate::nn::adam::Adam;
-use crate::nn::dense::{Layer, SharedDense};
+use crate::nn::dense::{BiasOrder, Scratch};
+use crate::nn::{ActorCritic, Dense};
 
 /// Per-minibatch statistics, as CleanRL logs them.
 #[derive(Debug, Clone, Copy, Default)]
@@ -35,76 +33,43 @@ pub struct LossConfig {
 }
 
 pub struct Fused {
-    actor: SharedDense,
-    critic: SharedDense,
-    log_std: usize,
-    act_dim: usize,
-    /// Every parameter, flat; `names` maps VarStore names to (offset, len).
-    params: Vec<f32>,
-    names: Vec<(String, usize, usize)>,
+    actor: Dense,
+    critic: Dense,
+    log_std: Vec<f32>,
+    /// The gradient of the actor's, the critic's and the log-std's parameters, in that order
+    /// (the order of the gradient's norm and of Adam's moments).
     grads: Vec<f32>,
     adam: Adam,
-    acts_a: Vec<Vec<f32>>,
-    acts_c: Vec<Vec<f32>>,
-}
-
-fn tensor_vec(t: &tch::Tensor) -> Vec<f32> {
-    Vec::try_from(t.detach().to_kind(tch::Kind::Float).flatten(0, -1)).expect("f32 parameters")
+    actor_acts: Scratch,
+    critic_acts: Scratch,
 }
 
 impl Fused {
     pub fn from_agent(agent: &ActorCritic) -> Self {
-        let vars: HashMap<String, tch::Tensor> = agent.vs.variables();
-        let mut params = Vec::new();
-        let mut names = Vec::new();
-        let mut push = |name: &str, params: &mut Vec<f32>| -> usize {
-            let data = tensor_vec(&vars[name]);
-            let off = params.len();
-            names.push((name.to_string(), off, data.len()));
-            params.extend(data);
-            off
-        };
-        let mut layers = |net: &str, params: &mut Vec<f32>| -> Vec<Layer> {
-            (0..)
-                .map_while(|i| {
-                    let wname = format!("{net}.l{i}.weight");
-                    let size = vars.get(&wname)?.size();
-                    let w = push(&wname, params);
-                    let b = push(&format!("{net}.l{i}.bias"), params);
-                    let layer = Layer { w, inp: size[1] as usize, out: size[0] as usize };
-                    assert_eq!(b, layer.b(), "the bias follows its weight");
-                    Some(layer)
-                })
-                .collect()
-        };
-        let activation = agent.config.activation;
-        let actor = SharedDense { layers: layers("actor", &mut params), activation };
-        let critic = SharedDense { layers: layers("critic", &mut params), activation };
-        let log_std = push("log_std", &mut params);
-        let n = params.len();
+        let critic = agent.critic.as_ref().expect("PPO's agent has a critic");
+        // PPO's stored bytes come from this order.
+        let net = |mlp| Dense::from_mlp(mlp).with_bias_order(BiasOrder::First);
+        let (actor, critic) = (net(&agent.actor), net(critic));
+        let log_std = Vec::<f32>::try_from(agent.log_std.detach().to_kind(tch::Kind::Float).flatten(0, -1)).expect("f32 log-std");
+        let n = actor.len() + critic.len() + log_std.len();
         Fused {
-            act_dim: actor.output_dim(),
             actor,
             critic,
             log_std,
-            params,
-            names,
             grads: vec![0.0; n],
             adam: Adam::new(n),
-            acts_a: Vec::new(),
-            acts_c: Vec::new(),
+            actor_acts: Scratch::default(),
+            critic_acts: Scratch::default(),
         }
     }
 
     /// Copies the parameters back into the agent's VarStore.
     pub fn write_to(&self, agent: &mut ActorCritic) {
-        let vars = agent.vs.variables();
+        self.actor.write_to(&agent.actor);
+        self.critic.write_to(agent.critic.as_ref().expect("PPO's agent has a critic"));
         tch::no_grad(|| {
-            for (name, off, len) in &self.names {
-                let mut t = vars[name].shallow_clone();
-                let src = tch::Tensor::from_slice(&self.params[*off..off + len]).view(t.size().as_slice());
-                t.copy_(&src);
-            }
+            let mut t = agent.log_std.shallow_clone();
+            t.copy_(&tch::Tensor::from_slice(&self.log_std).view(t.size().as_slice()));
         });
     }
 
@@ -121,14 +86,12 @@ impl Fused {
         cfg: LossConfig,
     ) -> MinibatchStats {
         let b = old_logp.len();
-        let ad = self.act_dim;
+        let ad = self.log_std.len();
         let bf = b as f32;
         self.grads.iter_mut().for_each(|g| *g = 0.0);
-        self.actor.forward(&self.params, obs, b, &mut self.acts_a);
-        self.critic.forward(&self.params, obs, b, &mut self.acts_c);
-        let mu = self.acts_a.last().expect("output");
-        let values = self.acts_c.last().expect("output");
-        let ls = &self.params[self.log_std..self.log_std + ad];
+        let mu = self.actor.forward(obs, b, &mut self.actor_acts);
+        let values = self.critic.forward(obs, b, &mut self.critic_acts);
+        let ls = &self.log_std;
         let half_log_2pi = 0.5 * (2.0 * std::f32::consts::PI).ln();
         // Minibatch advantage normalisation (unbiased std, as torch's .std()).
         let (amean, astd) = if cfg.norm_adv {
@@ -189,11 +152,13 @@ impl Fused {
         for g in &mut d_ls {
             *g -= cfg.ent_coef;
         }
-        for (j, g) in d_ls.iter().enumerate() {
-            self.grads[self.log_std + j] += g;
+        let (ga, rest) = self.grads.split_at_mut(self.actor.len());
+        let (gc, gls) = rest.split_at_mut(self.critic.len());
+        for (g, d) in gls.iter_mut().zip(&d_ls) {
+            *g += d;
         }
-        self.actor.backward(&self.params, &mut self.grads, &self.acts_a, d_mu, b);
-        self.critic.backward(&self.params, &mut self.grads, &self.acts_c, d_v, b);
+        self.actor.backward(obs, b, &d_mu, &mut self.actor_acts, ga);
+        self.critic.backward(obs, b, &d_v, &mut self.critic_acts, gc);
         stats.policy_loss /= b as f64;
         stats.value_loss /= b as f64;
         stats.approx_kl /= b as f64;
@@ -207,14 +172,15 @@ impl Fused {
     pub fn clip_and_step(&mut self, max_norm: f32, lr: f32, eps: f32) {
         let norm = self.grads.iter().map(|g| g * g).sum::<f32>().sqrt();
         let scale = (max_norm / (norm + 1e-6)).min(1.0);
-        self.adam.step_scaled(&mut self.params, &self.grads, scale, lr, eps);
+        let params = [&mut self.actor.params[..], &mut self.critic.params[..], &mut self.log_std[..]];
+        self.adam.step_scaled(params, &self.grads, scale, lr, eps);
+        self.actor.refresh();
+        self.critic.refresh();
     }
 
+    /// The last minibatch's gradient: the actor's, the critic's, then the log-std's.
     pub fn grads(&self) -> &[f32] {
         &self.grads
-    }
-    pub fn param_names(&self) -> &[(String, usize, usize)] {
-        &self.names
     }
 }
 
@@ -277,12 +243,12 @@ mod tests {
         loss.backward();
         let ours = stats.policy_loss - 0.01 * stats.entropy + 0.5 * stats.value_loss;
         assert!((ours - loss.double_value(&[])).abs() < 1e-5, "loss {ours} vs {}", loss.double_value(&[]));
-        let vars = agent.vs.variables();
-        for (name, off, len) in fused.param_names() {
-            let g: Vec<f32> = Vec::try_from(vars[name].grad().flatten(0, -1)).unwrap();
-            for (i, (a, e)) in fused.grads()[*off..off + len].iter().zip(&g).enumerate() {
-                assert!((a - e).abs() <= 1e-5 + 1e-4 * e.abs(), "{name}[{i}]: ours {a} vs autograd {e}");
-            }
+        let mlps = [&agent.actor, agent.critic.as_ref().unwrap()];
+        let params = mlps.iter().flat_map(|m| m.parameters()).flat_map(|(w, b)| [w, b]).chain([&agent.log_std]);
+        let want: Vec<f32> = params.flat_map(|t| Vec::<f32>::try_from(t.grad().flatten(0, -1)).unwrap()).collect();
+        assert_eq!(fused.grads().len(), want.len());
+        for (i, (a, e)) in fused.grads().iter().zip(&want).enumerate() {
+            assert!((a - e).abs() <= 1e-5 + 1e-4 * e.abs(), "parameter {i}: ours {a} vs autograd {e}");
         }
     }
 }
