@@ -32,6 +32,8 @@ pub enum Purpose {
     PpoEval,
     /// The actor's generator within an episode, from the episode's seed (index unused).
     ActorNoise,
+    /// `noise.toward: both`: the seed of the zero-action set beside the random-action one.
+    ZeroActionSet,
 }
 
 /// The seed of stream `index` for `purpose`, from the stage seed `seed`.
@@ -48,6 +50,7 @@ pub fn derive(seed: u64, purpose: Purpose, index: u64) -> u64 {
         Purpose::TrexModel => seed.wrapping_mul(1000).wrapping_add(index),
         Purpose::PpoEval => seed.wrapping_add(1_000_000 + index),
         Purpose::ActorNoise => seed ^ 0x9e37_79b9_7f4a_7c15,
+        Purpose::ZeroActionSet => episode(seed ^ 0x2e70, index),
     }
 }
 
@@ -59,7 +62,7 @@ mod tests {
     /// Every purpose, in declaration order. `position` below is an exhaustive match, so a new
     /// variant does not compile until it has a position there; list it here too (nothing
     /// fails where it is missing: the tests then leave it out).
-    const ALL: [Purpose; 11] = [
+    const ALL: [Purpose; 12] = [
         Purpose::Episode,
         Purpose::EvalEpisode,
         Purpose::Source,
@@ -71,6 +74,7 @@ mod tests {
         Purpose::TrexModel,
         Purpose::PpoEval,
         Purpose::ActorNoise,
+        Purpose::ZeroActionSet,
     ];
 
     fn position(p: Purpose) -> usize {
@@ -86,6 +90,7 @@ mod tests {
             Purpose::TrexModel => 8,
             Purpose::PpoEval => 9,
             Purpose::ActorNoise => 10,
+            Purpose::ZeroActionSet => 11,
         }
     }
 

@@ -867,6 +867,56 @@ print(steps)
     assert!(py(fields, &args).trim().parse::<usize>().unwrap() > 100);
 }
 
+/// `noise.toward: both` gives D-REX's ranked set two sets per level: random-action rollouts
+/// (group 0) and zero-action ones (group 1, from their own resets), read back with Python's
+/// mcap reader; at epsilon 1 the zero-action Ant never moves a joint and stands the whole
+/// episode, the random-action one does not. The T-REX stage learns from both.
+#[test]
+fn noise_toward_both_ranks_still_rollouts_beside_random_ones() {
+    let dir = TempDir::new("toward");
+    let store = dir.join("store");
+    let smoke = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
+    let file = dir.join("toward.yaml");
+    let yaml = smoke
+        .replace("env: Hopper-v5", "name: toward-smoke\nenv: Ant-v5")
+        .replace("methods: [bc, drex, idrex-interpolation, idrex-action-noise, idrex-multi-bc]", "methods: [bc, drex]")
+        .replace(
+            "  schedule: [0.0, 0.25, 0.5, 0.75, 1.0]\n  rollouts_per_level: 2",
+            "  schedule: [0.0, 1.0]\n  rollouts_per_level: 1\n  toward: both",
+        );
+    assert!(yaml.contains("toward: both"), "the smoke file's noise block moved: {yaml}");
+    std::fs::write(&file, yaml).unwrap();
+    let rec = dir.join("toward.rrd");
+    let out = idrex(&["pipeline", "run", file.to_str().unwrap(), "--store", store.to_str().unwrap(), "--recording", rec.to_str().unwrap()]);
+    assert!(out.status.success(), "{}\n{}", stdout(&out), stderr(&out));
+    let mcaps: Vec<String> =
+        walk(&store).into_iter().filter(|p| p.extension().is_some_and(|e| e == "mcap")).map(|p| p.display().to_string()).collect();
+    let check = r#"
+import json, sys
+from mcap.reader import make_reader
+for path in sys.argv[1:]:
+    r = make_reader(open(path, "rb"))
+    meta = {m.name: m.metadata for m in r.iter_metadata()}
+    episodes = [json.loads(v) for _, v in sorted(meta["idrex.episodes"].items())]
+    if not any(e["noise"] == 1.0 for e in episodes):
+        continue
+    by = {(e["noise"], e["group"]): i for i, e in enumerate(episodes)}
+    assert sorted(by) == [(0.0, 0), (0.0, 1), (1.0, 0), (1.0, 1)], by
+    assert episodes[by[(1.0, 0)]]["seed"] != episodes[by[(1.0, 1)]]["seed"]
+    acts = {}
+    for schema, channel, msg in r.iter_messages(topics=["/step"]):
+        m = json.loads(msg.data)
+        acts.setdefault(m["episode"], []).append(m["action"])
+    still, rand = acts[by[(1.0, 1)]], acts[by[(1.0, 0)]]
+    assert all(a == [0.0] * 8 for a in still), still[:3]
+    assert len(still) == 1000 and episodes[by[(1.0, 1)]]["truncated"], len(still)
+    assert sum(abs(x) for a in rand for x in a) > 0.1 * 8 * len(rand)
+    print("ok")
+"#;
+    let args: Vec<&str> = mcaps.iter().map(String::as_str).collect();
+    assert_eq!(py(check, &args).trim(), "ok", "exactly one ranked set with both kinds of rollout");
+}
+
 /// The locked test set's committed archives (`report/r<R>/manifests.ndjson.zst`, replicate R's
 /// stages) rebuild, with no store, every report committed as the replicates landed: each
 /// `report/r<R>/` (and `report/final/`) from exactly the archives of the replicates it

@@ -36,6 +36,28 @@ impl NoiseProcess {
     }
 }
 
+/// What an epsilon-greedy step takes instead of the policy's action (`noise.toward`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseToward {
+    /// A uniform random action in the box (D-REX's): noisier rollouts are jerkier and, on
+    /// tasks that end, shorter.
+    #[default]
+    Random,
+    /// The zero action: noisier rollouts do less, and a robot that stands still ranks below
+    /// one that moves as the policy does.
+    Zero,
+    /// Both sets, `rollouts_per_level` each at every level; the zero-action rollouts are
+    /// group 1 (with `trex.same_group` the two rank apart).
+    Both,
+}
+
+impl NoiseToward {
+    pub fn is_random(&self) -> bool {
+        *self == NoiseToward::Random
+    }
+}
+
 /// D-REX's noise injection: epsilon-greedy rollouts around a policy's mean action, `per_level`
 /// per epsilon of `schedule`.
 pub fn epsilon_greedy(
@@ -50,21 +72,53 @@ pub fn epsilon_greedy(
     rollout::at_levels(env, seed, schedule, per_level, meta, |eps| EpsilonGreedy {
         inner: PolicyActor::mean_of(policy),
         eps,
-        uniform: uniform.clone(),
+        degraded: uniform.clone(),
     })
 }
 
-/// With probability `eps` a uniform random action in the box, else the inner policy's.
-pub struct EpsilonGreedy<A> {
-    pub inner: A,
-    pub eps: f64,
-    pub uniform: UniformActor,
+/// Epsilon-greedy rollouts degraded `toward` a random or the zero action (or both sets; the
+/// zero-action set from its own episode seeds, so the two never share a reset).
+pub fn degrade(
+    env: &mut Env,
+    policy: &ActorCritic,
+    schedule: &[f64],
+    per_level: usize,
+    seed: u64,
+    meta: &TrajMeta,
+    toward: NoiseToward,
+) -> Vec<Trajectory> {
+    let zero = vec![0.0; env.act_dim()];
+    let toward_zero = |env: &mut Env, seed: u64, meta: &TrajMeta| {
+        rollout::at_levels(env, seed, schedule, per_level, meta, |eps| EpsilonGreedy {
+            inner: PolicyActor::mean_of(policy),
+            eps,
+            degraded: ConstantActor(zero.clone()),
+        })
+    };
+    match toward {
+        NoiseToward::Random => epsilon_greedy(env, policy, schedule, per_level, seed, meta),
+        NoiseToward::Zero => toward_zero(env, seed, meta),
+        NoiseToward::Both => {
+            let mut trajs = epsilon_greedy(env, policy, schedule, per_level, seed, meta);
+            let zero_meta = TrajMeta { group: 1, ..meta.clone() };
+            trajs.extend(toward_zero(env, crate::seed::derive(seed, crate::seed::Purpose::ZeroActionSet, 0), &zero_meta));
+            trajs
+        }
+    }
 }
 
-impl<A: Actor> Actor for EpsilonGreedy<A> {
+/// With probability `eps` the degraded action (a uniform random one in the box, D-REX's, or
+/// another actor's), else the inner policy's.
+pub struct EpsilonGreedy<A, D = UniformActor> {
+    pub inner: A,
+    pub eps: f64,
+    pub degraded: D,
+}
+
+impl<A: Actor, D: Actor> Actor for EpsilonGreedy<A, D> {
     fn act(&mut self, obs: &[f32], rng: &mut ChaCha8Rng, out: &mut [f32]) {
         if rng.random_bool(self.eps.clamp(0.0, 1.0)) {
-            self.uniform.act(obs, rng, out);
+            self.degraded.act(obs, rng, out);
         } else {
             self.inner.act(obs, rng, out);
         }
@@ -180,7 +234,7 @@ impl<A: Actor, B: Actor> Actor for Interpolation<A, B> {
     }
 }
 
-/// Acts with a fixed action; a stand-in policy for tests.
+/// Acts with a fixed action (the zero action of `noise.toward: zero`; a stand-in policy in tests).
 pub struct ConstantActor(pub Vec<f32>);
 
 impl Actor for ConstantActor {
@@ -211,7 +265,7 @@ mod tests {
         let mut a = EpsilonGreedy {
             inner: ConstantActor(vec![0.5, 0.5]),
             eps: 1.0,
-            uniform: UniformActor { low: vec![-1.0, -2.0], high: vec![1.0, 2.0] },
+            degraded: UniformActor { low: vec![-1.0, -2.0], high: vec![1.0, 2.0] },
         };
         let acts = run(&mut a, 20_000, 0);
         for (d, (lo, hi)) in [(-1.0f32, 1.0f32), (-2.0, 2.0)].into_iter().enumerate() {
@@ -233,12 +287,21 @@ mod tests {
         let mut a = EpsilonGreedy {
             inner: ConstantActor(vec![0.5, 0.5]),
             eps: 0.0,
-            uniform: UniformActor { low: vec![-1.0; 2], high: vec![1.0; 2] },
+            degraded: UniformActor { low: vec![-1.0; 2], high: vec![1.0; 2] },
         };
         assert!(run(&mut a, 100, 0).iter().all(|x| x == &vec![0.5, 0.5]));
         let mut g = GaussianNoise { inner: ConstantActor(vec![0.0, 0.0]), sigma: 0.3 };
         assert_eq!(run(&mut g, 50, 3), run(&mut g, 50, 3));
         assert_ne!(run(&mut g, 50, 3), run(&mut g, 50, 4));
+    }
+
+    #[test]
+    fn epsilon_toward_zero_takes_the_zero_action_in_proportion() {
+        let mut a = EpsilonGreedy { inner: ConstantActor(vec![0.5, 0.5]), eps: 0.3, degraded: ConstantActor(vec![0.0, 0.0]) };
+        let acts = run(&mut a, 10_000, 5);
+        assert!(acts.iter().all(|x| x == &vec![0.5, 0.5] || x == &vec![0.0, 0.0]));
+        let zeros = acts.iter().filter(|x| x[0] == 0.0).count();
+        assert!((2_800..=3_200).contains(&zeros), "{zeros} zero actions of 10,000 at epsilon 0.3");
     }
 
     #[test]

@@ -9,7 +9,7 @@ pub mod settings;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use crate::algo::{bc::BcConfig, ppo::PpoConfig, trex::TrexConfig};
+use crate::algo::{bc::BcConfig, noise::NoiseToward, ppo::PpoConfig, trex::TrexConfig};
 use crate::env::{EnvId, Horizon};
 use crate::nn::DeviceChoice;
 use crate::nn::reward::{Combine, CtrlAction, RewardLevel};
@@ -165,11 +165,22 @@ pub struct NoiseConfig {
     /// termination, the original code's) or `fixed` (every rollout runs to the time limit;
     /// `ppo.horizon` is the same for PPO's training episodes). Evaluations use the task's.
     pub horizon: Horizon,
+    /// What an epsilon-greedy step of D-REX's ranked rollouts takes instead of BC's action:
+    /// `random` (a uniform random action, the original code's), `zero` (the zero action: the
+    /// noisier, the stiller, so standing still ranks below moving as BC does) or `both` (both
+    /// sets at every level). iD-REX's iterations keep `random`.
+    pub toward: NoiseToward,
 }
 
 impl Default for NoiseConfig {
     fn default() -> Self {
-        NoiseConfig { schedule: (0..20).map(|i| i as f64 * 0.05).collect(), rollouts_per_level: 5, bc: None, horizon: Horizon::Task }
+        NoiseConfig {
+            schedule: (0..20).map(|i| i as f64 * 0.05).collect(),
+            rollouts_per_level: 5,
+            bc: None,
+            horizon: Horizon::Task,
+            toward: NoiseToward::Random,
+        }
     }
 }
 

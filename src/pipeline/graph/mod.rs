@@ -248,6 +248,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             schedule: s.noise.schedule.clone(),
             rollouts_per_level: s.noise.rollouts_per_level,
             horizon: s.noise.horizon.on(env),
+            toward: s.noise.toward,
         }),
         seed0,
         Inputs::NoiseRollouts(NoiseInputs { policy: source.clone() }),

@@ -1,9 +1,10 @@
 //! `noise-rollouts`: D-REX's automatically ranked data, epsilon-greedy rollouts of the BC
-//! policy at each level of the noise schedule (lower epsilon ranks higher).
+//! policy at each level of the noise schedule (lower epsilon ranks higher), each noisy step a
+//! uniform random action or the zero action (`noise.toward`).
 use std::path::PathBuf;
 
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
-use crate::algo::noise;
+use crate::algo::noise::{self, NoiseToward};
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId, Horizon};
 use crate::error::Result;
@@ -18,6 +19,10 @@ pub struct NoiseParams {
     /// Where the rollouts end ([`crate::env::Horizon`]; absent from the key when `task`).
     #[serde(default, skip_serializing_if = "Horizon::is_task")]
     pub horizon: Horizon,
+    /// What a noisy step takes instead of the policy's action (absent from the key when
+    /// `random`, D-REX's).
+    #[serde(default, skip_serializing_if = "NoiseToward::is_random")]
+    pub toward: NoiseToward,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -34,9 +39,35 @@ crate::stage_inputs! {
 pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Result<NoiseMetrics> {
     let mut env = Env::new(p.env)?.with_horizon(p.horizon);
     let policy = load_policy_for(&inputs.policy, &env, p.env)?;
-    ctx.progress.set_message("epsilon-greedy rollouts");
+    ctx.progress.set_message(match p.toward {
+        NoiseToward::Random => "epsilon-greedy rollouts",
+        NoiseToward::Zero => "epsilon-greedy rollouts toward the zero action",
+        NoiseToward::Both => "epsilon-greedy rollouts toward random and zero actions",
+    });
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
-    let trajs = noise::epsilon_greedy(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta);
+    let trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward);
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(NoiseMetrics { degradation: degradation(&trajs), returns: RolloutSummary::of(&trajs) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// D-REX's own degradation stays out of the key, so every stored ranked set keeps its key;
+    /// the zero action enters it.
+    #[test]
+    fn random_is_absent_from_the_key() {
+        let p = NoiseParams {
+            env: EnvId::Ant,
+            schedule: vec![0.0, 1.0],
+            rollouts_per_level: 1,
+            horizon: Horizon::Task,
+            toward: NoiseToward::Random,
+        };
+        let key = serde_json::to_string(&p).unwrap();
+        assert!(!key.contains("toward"), "{key}");
+        let zero = serde_json::to_string(&NoiseParams { toward: NoiseToward::Zero, ..p }).unwrap();
+        assert!(zero.contains(r#""toward":"zero""#), "{zero}");
+    }
 }
