@@ -178,14 +178,16 @@ fn single_tables(
         let runs = rows.iter().filter(|r| r.method != Method::Bc.name()).map(|r| r.runs).max().unwrap_or(0);
         out.push_str(&format!(
             "### {env}, {table}{}\n\nFinal policy, ground-truth return: the mean over {runs} RL runs with a 95 % bootstrap interval over runs. \
-             BC {}; the demonstrations {} (average).\n\n| method | return [95 % CI] | against BC | against the demonstrations |\n|---|---|---|---|\n",
+             BC {}; the demonstrations {} (average).\n\n",
             caveat(env, &bc.study),
             num(Some(bc.stats.mean)),
             num(Some(demo))
         ));
+        // Before the table, not inside it: a line between a table's header and its rows ends it.
         if let Some(gap) = CloneGap::check(bc.stats.mean, demo, bc_warning) {
             out.push_str(&format!("**{}**\n\n", gap.sentence()));
         }
+        out.push_str("| method | return [95 % CI] | against BC | against the demonstrations |\n|---|---|---|---|\n");
         let (mut both, mut avg, mut below) = (vec![], vec![], vec![]);
         for r in rows.iter().filter(|r| r.method != Method::Bc.name()) {
             let m = r.stats.mean;
@@ -244,9 +246,7 @@ fn replicated_studies(
              over its runs, with a 95 % interval that resamples replicates and then runs. BC {}. \"k of n\" counts replicates; p is the \
              one-sided sign test, and \"rate ≥\" the 95 % Clopper-Pearson lower bound on the rate. Against another method: \
              rliable's probability of improvement P with its independent-bootstrap interval, then the replicates where the \
-             method scored above (paired by replicate) with the exact interval of that rate and the sign test's p.\n\n\
-             | method | return [95 % CI] | against BC | against D-REX | against K - 1 | above the demonstrations' average |\n\
-             |---|---|---|---|---|---|\n",
+             method scored above (paired by replicate) with the exact interval of that rate and the sign test's p.\n\n",
             caveat(env, study),
             num(Some(bc.mean))
         ));
@@ -267,6 +267,10 @@ fn replicated_studies(
                 worst.sentence().replacen("BC ends", "BC ends (the widest gap)", 1)
             ));
         }
+        out.push_str(
+            "| method | return [95 % CI] | against BC | against D-REX | against K - 1 | above the demonstrations' average |\n\
+             |---|---|---|---|---|---|\n",
+        );
         let (mut both, mut avg, mut below) = (vec![], vec![], vec![]);
         for r in rows.iter().filter(|r| r.method != Method::Bc.name()) {
             let bc_of: BTreeMap<usize, f64> = bc.scores.iter().copied().collect();
@@ -358,6 +362,7 @@ mod tests {
         assert!(md.contains("iD-REX action noise is not above both. These are 3 RL runs on one seed set"), "{md}");
         // BC at 67 % of its demonstrations: under a 0.7 threshold the answer says so first.
         assert!(md.contains("**BC ends far below its demonstrations: 100.0 against their 150.0 (67 % of it"), "{md}");
+        assert!(md.find("far below") < md.find("| method |"), "the warning comes before the table, not inside it: {md}");
         assert!(!markdown(&rows, &[], &[], &demos, &[], 0.6).contains("far below"));
         // Without BC or the demonstrations there is nothing to answer against.
         assert_eq!(markdown(&rows[1..], &[], &[], &demos, &[], 0.7), "");
@@ -400,5 +405,6 @@ mod tests {
             md.contains("**On 2 of 10 replicates BC ends (the widest gap) far below its demonstrations: 100.0 against their 300.0"),
             "{md}"
         );
+        assert!(md.find("far below") < md.find("| method |"), "the warning comes before the table, not inside it: {md}");
     }
 }
