@@ -1004,6 +1004,41 @@ fn the_committed_ant_archive_rebuilds_its_report() {
     }
 }
 
+/// The second locked set's final report is what its 40 committed archives (ten replicates of
+/// four tasks) give: every row of its tables, the 20 declared questions with their Holm p among
+/// them, so a later report binary that answers differently fails here.
+#[test]
+fn the_committed_archives_rebuild_the_second_locked_report() {
+    let dir = TempDir::new("locked2-archives");
+    let reports = repo("analysis/results/locked2/report");
+    let mut args = vec!["report".to_string(), "--store".into(), dir.join("none").display().to_string()];
+    for r in 0..10 {
+        for task in ["halfcheetah", "hopper", "walker2d", "ant"] {
+            let archive = reports.join(format!("r{r}/{task}.ndjson.zst"));
+            assert!(archive.is_file(), "{}", archive.display());
+            args.extend(["--archive".to_string(), archive.display().to_string()]);
+        }
+    }
+    let out = dir.join("out");
+    args.extend(["--out".to_string(), out.display().to_string(), "--format".into(), "csv".into()]);
+    let res = idrex(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(res.status.success(), "{}", stderr(&res));
+    let final_report = reports.join("final");
+    for table in ["returns.csv", "protocols.csv", "aggregate.csv", "improvement.csv", "questions.csv", "correlations.csv", "terms.csv"] {
+        let ours = std::fs::read_to_string(out.join(table)).unwrap();
+        let committed = std::fs::read_to_string(final_report.join(table)).unwrap();
+        assert!(committed.lines().count() > 1, "{table}: no rows");
+        assert_eq!(ours.lines().count(), committed.lines().count(), "{table}: rows");
+        for line in committed.lines() {
+            assert!(ours.lines().any(|l| l == line), "{table}: the archives do not give the committed row\n{line}");
+        }
+    }
+    let questions = std::fs::read_to_string(final_report.join("questions.csv")).unwrap();
+    assert_eq!(questions.lines().count(), 21, "the 20 declared questions");
+    // The last two columns: the family's size, then the verdict.
+    assert!(questions.lines().skip(1).all(|l| l.rsplit(',').nth(1) == Some("20")), "each corrected over the family of 20: {questions}");
+}
+
 /// On a machine whose store never held the locked test set, its committed archives still lock
 /// its seeds: another configuration on them is refused before any stage runs.
 #[test]
