@@ -34,6 +34,8 @@ pub enum Purpose {
     ActorNoise,
     /// `noise.toward: both`: the seed of the zero-action set beside the random-action one.
     ZeroActionSet,
+    /// `noise.still`: the k-th episode of the zero action ranked below every noise level.
+    StillSet,
 }
 
 /// The seed of stream `index` for `purpose`, from the stage seed `seed`.
@@ -51,6 +53,7 @@ pub fn derive(seed: u64, purpose: Purpose, index: u64) -> u64 {
         Purpose::PpoEval => seed.wrapping_add(1_000_000 + index),
         Purpose::ActorNoise => seed ^ 0x9e37_79b9_7f4a_7c15,
         Purpose::ZeroActionSet => episode(seed ^ 0x2e70, index),
+        Purpose::StillSet => episode(seed ^ 0x5711, index),
     }
 }
 
@@ -62,7 +65,7 @@ mod tests {
     /// Every purpose, in declaration order. `position` below is an exhaustive match, so a new
     /// variant does not compile until it has a position there; list it here too (nothing
     /// fails where it is missing: the tests then leave it out).
-    const ALL: [Purpose; 12] = [
+    const ALL: [Purpose; 13] = [
         Purpose::Episode,
         Purpose::EvalEpisode,
         Purpose::Source,
@@ -75,6 +78,7 @@ mod tests {
         Purpose::PpoEval,
         Purpose::ActorNoise,
         Purpose::ZeroActionSet,
+        Purpose::StillSet,
     ];
 
     fn position(p: Purpose) -> usize {
@@ -91,6 +95,7 @@ mod tests {
             Purpose::PpoEval => 9,
             Purpose::ActorNoise => 10,
             Purpose::ZeroActionSet => 11,
+            Purpose::StillSet => 12,
         }
     }
 

@@ -76,9 +76,40 @@ pub fn epsilon_greedy(
     })
 }
 
+/// The noise level the still set is labelled with ([`still`]): epsilon 1 toward the zero
+/// action, which ranks it below every level at least `trex.min_margin` less noisy and makes it
+/// the ranked set's noisiest level (the floor of `reward.level: ranked-floor`).
+pub const STILL_LEVEL: f64 = 1.0;
+
+/// `episodes` episodes of the zero action, from their own resets: the robot doing nothing,
+/// ranked below the noisy rollouts as the D-REX code's Atari ranking ranks its no-op episodes
+/// (`add_noop`), so that a reward cannot pay most for standing still.
+pub fn still(env: &mut Env, episodes: usize, seed: u64, meta: &TrajMeta) -> Vec<Trajectory> {
+    let mut nothing = ConstantActor(vec![0.0; env.act_dim()]);
+    let meta = TrajMeta { noise: STILL_LEVEL, ..meta.clone() };
+    rollout::episodes(env, &mut nothing, episodes, seed, crate::seed::Purpose::StillSet, &meta)
+}
+
 /// Epsilon-greedy rollouts degraded `toward` a random or the zero action (or both sets; the
-/// zero-action set from its own episode seeds, so the two never share a reset).
+/// zero-action set from its own episode seeds, so the two never share a reset), then `still`
+/// episodes of the zero action ranked below them ([`still`]).
+#[allow(clippy::too_many_arguments)]
 pub fn degrade(
+    env: &mut Env,
+    policy: &ActorCritic,
+    schedule: &[f64],
+    per_level: usize,
+    seed: u64,
+    meta: &TrajMeta,
+    toward: NoiseToward,
+    still_episodes: usize,
+) -> Vec<Trajectory> {
+    let mut trajs = degrade_toward(env, policy, schedule, per_level, seed, meta, toward);
+    trajs.extend(still(env, still_episodes, seed, meta));
+    trajs
+}
+
+fn degrade_toward(
     env: &mut Env,
     policy: &ActorCritic,
     schedule: &[f64],
@@ -302,6 +333,31 @@ mod tests {
         assert!(acts.iter().all(|x| x == &vec![0.5, 0.5] || x == &vec![0.0, 0.0]));
         let zeros = acts.iter().filter(|x| x[0] == 0.0).count();
         assert!((2_800..=3_200).contains(&zeros), "{zeros} zero actions of 10,000 at epsilon 0.3");
+    }
+
+    /// The still set: the zero action every step from resets of its own, labelled epsilon 1,
+    /// so T-REX ranks every level at least the margin less noisy above it; on Ant the robot
+    /// doing nothing stays healthy to the time limit.
+    #[test]
+    fn the_still_set_does_nothing_and_ranks_below_the_levels() {
+        let mut env = Env::new(crate::env::EnvId::Ant).unwrap();
+        let meta = TrajMeta { source: "bc".into(), ..Default::default() };
+        let still = still(&mut env, 2, 11, &meta);
+        assert_eq!(still.len(), 2);
+        assert_ne!(still[0].meta.seed, still[1].meta.seed);
+        assert_ne!(still[0].obs[..27], still[1].obs[..27], "each episode from its own reset");
+        for t in &still {
+            assert!(t.actions.iter().all(|&a| a == 0.0));
+            assert_eq!((t.meta.noise, t.len(), t.truncated, t.terminated), (STILL_LEVEL, 1000, true, false));
+        }
+        let levels = [0.0, 0.5, 0.7, 0.8];
+        let mut scores: Vec<f64> = levels.iter().map(|e| -e).collect();
+        scores.extend(still.iter().map(|t| -t.meta.noise));
+        let ranking = crate::algo::trex::Ranking::by_score(scores);
+        let cfg = crate::algo::trex::TrexConfig::default();
+        let above_still: Vec<bool> = (0..levels.len()).map(|i| ranking.prefers(i, levels.len(), cfg.min_margin)).collect();
+        assert_eq!(above_still, [true, true, true, false], "margin {}", cfg.min_margin);
+        assert!(!ranking.prefers(levels.len(), 0, cfg.min_margin));
     }
 
     #[test]

@@ -170,6 +170,12 @@ pub struct NoiseConfig {
     /// noisier, the stiller, so standing still ranks below moving as BC does) or `both` (both
     /// sets at every level). iD-REX's iterations keep `random`.
     pub toward: NoiseToward,
+    /// Episodes of the zero action (the robot doing nothing) added to D-REX's ranked set below
+    /// every level, labelled epsilon 1: ranked under each level at least `trex.min_margin` less
+    /// noisy, and the floor of `reward.level: ranked-floor`, so standing still earns nothing.
+    /// The D-REX code ranks no-op episodes lowest on Atari (`add_noop`); 0 (the default) adds
+    /// none, as its MuJoCo code.
+    pub still: usize,
 }
 
 impl Default for NoiseConfig {
@@ -180,6 +186,7 @@ impl Default for NoiseConfig {
             bc: None,
             horizon: Horizon::Task,
             toward: NoiseToward::Random,
+            still: 0,
         }
     }
 }

@@ -249,6 +249,7 @@ pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
             rollouts_per_level: s.noise.rollouts_per_level,
             horizon: s.noise.horizon.on(env),
             toward: s.noise.toward,
+            still: s.noise.still,
         }),
         seed0,
         Inputs::NoiseRollouts(NoiseInputs { policy: source.clone() }),
@@ -591,6 +592,21 @@ mod tests {
         // multi-BC's clones) and everything after.
         assert_eq!(changed("trex:\n  init: default\n"), descendants(&[StageKind::Trex]));
         assert_eq!(changed("bc:\n  init: normal-0.02\n"), descendants(&[StageKind::Bc, StageKind::MultiBcRollouts]));
+    }
+
+    /// The still episodes change D-REX's ranked set and everything after it (every iD-REX
+    /// variant ranks with it), never BC; `still: 0` is the default and changes nothing.
+    #[test]
+    fn still_episodes_change_exactly_drex_ranked_set_and_what_follows() {
+        let g = expand(&Pipeline::parse(std::path::Path::new("p.yaml"), BASE).unwrap()).unwrap();
+        let mut expected = g.descendants("drex/noise");
+        expected.sort();
+        expected.dedup();
+        let mut got = changed("  still: 5\n");
+        got.sort();
+        assert_eq!(got, expected);
+        assert!(got.iter().any(|n| n == "drex/noise") && !got.iter().any(|n| n == "bc" || n == "demos"), "{got:?}");
+        assert!(changed("  still: 0\n").is_empty());
     }
 
     /// An imported demonstration file is identified by its content, not where it lies: a

@@ -1,6 +1,7 @@
 //! `noise-rollouts`: D-REX's automatically ranked data, epsilon-greedy rollouts of the BC
 //! policy at each level of the noise schedule (lower epsilon ranks higher), each noisy step a
-//! uniform random action or the zero action (`noise.toward`).
+//! uniform random action or the zero action (`noise.toward`), and optionally episodes of the
+//! zero action ranked below every level (`noise.still`).
 use std::path::PathBuf;
 
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
@@ -23,6 +24,14 @@ pub struct NoiseParams {
     /// `random`, D-REX's).
     #[serde(default, skip_serializing_if = "NoiseToward::is_random")]
     pub toward: NoiseToward,
+    /// Episodes of the zero action ranked below every level (absent from the key at 0, D-REX's
+    /// MuJoCo code's).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub still: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -45,7 +54,7 @@ pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Re
         NoiseToward::Both => "epsilon-greedy rollouts toward random and zero actions",
     });
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
-    let trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward);
+    let trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward, p.still);
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(NoiseMetrics { degradation: degradation(&trajs), returns: RolloutSummary::of(&trajs) })
 }
@@ -55,7 +64,7 @@ mod tests {
     use super::*;
 
     /// D-REX's own degradation stays out of the key, so every stored ranked set keeps its key;
-    /// the zero action enters it.
+    /// the zero action and a still set enter it.
     #[test]
     fn random_is_absent_from_the_key() {
         let p = NoiseParams {
@@ -64,10 +73,13 @@ mod tests {
             rollouts_per_level: 1,
             horizon: Horizon::Task,
             toward: NoiseToward::Random,
+            still: 0,
         };
         let key = serde_json::to_string(&p).unwrap();
-        assert!(!key.contains("toward"), "{key}");
-        let zero = serde_json::to_string(&NoiseParams { toward: NoiseToward::Zero, ..p }).unwrap();
+        assert!(!key.contains("toward") && !key.contains("still"), "{key}");
+        let zero = serde_json::to_string(&NoiseParams { toward: NoiseToward::Zero, ..p.clone() }).unwrap();
         assert!(zero.contains(r#""toward":"zero""#), "{zero}");
+        let still = serde_json::to_string(&NoiseParams { still: 5, ..p }).unwrap();
+        assert!(still.contains(r#""still":5"#), "{still}");
     }
 }
