@@ -104,20 +104,6 @@ pub fn degrade(
     toward: NoiseToward,
     still_episodes: usize,
 ) -> Vec<Trajectory> {
-    let mut trajs = degrade_toward(env, policy, schedule, per_level, seed, meta, toward);
-    trajs.extend(still(env, still_episodes, seed, meta));
-    trajs
-}
-
-fn degrade_toward(
-    env: &mut Env,
-    policy: &ActorCritic,
-    schedule: &[f64],
-    per_level: usize,
-    seed: u64,
-    meta: &TrajMeta,
-    toward: NoiseToward,
-) -> Vec<Trajectory> {
     let zero = vec![0.0; env.act_dim()];
     let toward_zero = |env: &mut Env, seed: u64, meta: &TrajMeta| {
         rollout::at_levels(env, seed, schedule, per_level, meta, |eps| EpsilonGreedy {
@@ -126,7 +112,7 @@ fn degrade_toward(
             degraded: ConstantActor(zero.clone()),
         })
     };
-    match toward {
+    let mut trajs = match toward {
         NoiseToward::Random => epsilon_greedy(env, policy, schedule, per_level, seed, meta),
         NoiseToward::Zero => toward_zero(env, seed, meta),
         NoiseToward::Both => {
@@ -135,7 +121,9 @@ fn degrade_toward(
             trajs.extend(toward_zero(env, crate::seed::derive(seed, crate::seed::Purpose::ZeroActionSet, 0), &zero_meta));
             trajs
         }
-    }
+    };
+    trajs.extend(still(env, still_episodes, seed, meta));
+    trajs
 }
 
 /// With probability `eps` the degraded action (a uniform random one in the box, D-REX's, or
