@@ -91,9 +91,7 @@ pub fn still(env: &mut Env, episodes: usize, seed: u64, meta: &TrajMeta) -> Vec<
 }
 
 /// Epsilon-greedy rollouts degraded `toward` a random or the zero action (or both sets; the
-/// zero-action set from its own episode seeds, so the two never share a reset), then `still`
-/// episodes of the zero action ranked below them ([`still`]).
-#[allow(clippy::too_many_arguments)]
+/// zero-action set from its own episode seeds, so the two never share a reset).
 pub fn degrade(
     env: &mut Env,
     policy: &ActorCritic,
@@ -102,7 +100,6 @@ pub fn degrade(
     seed: u64,
     meta: &TrajMeta,
     toward: NoiseToward,
-    still_episodes: usize,
 ) -> Vec<Trajectory> {
     let zero = vec![0.0; env.act_dim()];
     let toward_zero = |env: &mut Env, seed: u64, meta: &TrajMeta| {
@@ -112,7 +109,7 @@ pub fn degrade(
             degraded: ConstantActor(zero.clone()),
         })
     };
-    let mut trajs = match toward {
+    match toward {
         NoiseToward::Random => epsilon_greedy(env, policy, schedule, per_level, seed, meta),
         NoiseToward::Zero => toward_zero(env, seed, meta),
         NoiseToward::Both => {
@@ -121,9 +118,7 @@ pub fn degrade(
             trajs.extend(toward_zero(env, crate::seed::derive(seed, crate::seed::Purpose::ZeroActionSet, 0), &zero_meta));
             trajs
         }
-    };
-    trajs.extend(still(env, still_episodes, seed, meta));
-    trajs
+    }
 }
 
 /// With probability `eps` the degraded action (a uniform random one in the box, D-REX's, or

@@ -79,7 +79,7 @@ impl Ranking {
         Ranking { scores, groups: vec![0; n], levels: vec![0; n], same_group: false, cross_level: false }
     }
 
-    pub fn prefers(&self, i: usize, j: usize, margin: f64) -> bool {
+    pub(crate) fn prefers(&self, i: usize, j: usize, margin: f64) -> bool {
         let group_ok = !self.same_group || self.groups[i] == self.groups[j];
         let by_score = group_ok && self.levels[i] == self.levels[j] && self.scores[i] - self.scores[j] >= margin - 1e-12;
         by_score || (self.cross_level && self.levels[i] > self.levels[j])

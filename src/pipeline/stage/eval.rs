@@ -30,7 +30,7 @@ pub struct EvalParams {
     pub run: usize,
     /// The study replicate (independent seeds for every stage) the run belongs to; absent
     /// for replicate 0, whose keys are those of a file without replicates.
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "super::is_zero")]
     pub replicate: usize,
     /// The sweep variant the run belongs to (absent outside sweeps, and for the variant that
     /// sets nothing: the file itself).
@@ -51,10 +51,6 @@ pub struct VariantTag {
     pub settings: Vec<String>,
     /// The study (`pipeline` name) it is compared against.
     pub baseline: String,
-}
-
-fn is_zero(r: &usize) -> bool {
-    *r == 0
 }
 
 impl EvalParams {

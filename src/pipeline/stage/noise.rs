@@ -26,12 +26,8 @@ pub struct NoiseParams {
     pub toward: NoiseToward,
     /// Episodes of the zero action ranked below every level (absent from the key at 0, D-REX's
     /// MuJoCo code's).
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default, skip_serializing_if = "super::is_zero")]
     pub still: usize,
-}
-
-fn is_zero(n: &usize) -> bool {
-    *n == 0
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -54,7 +50,8 @@ pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Re
         NoiseToward::Both => "epsilon-greedy rollouts toward random and zero actions",
     });
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
-    let trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward, p.still);
+    let mut trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward);
+    trajs.extend(noise::still(&mut env, p.still, ctx.seed, &meta));
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(NoiseMetrics { degradation: degradation(&trajs), returns: RolloutSummary::of(&trajs) })
 }
