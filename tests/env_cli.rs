@@ -39,3 +39,23 @@ fn mistakes_give_one_clear_line() {
     fails_with(&["env", "rollout", "--env", "Hopper-v5", "--actions", ok, "--state", s], "qpos: expected 6 values, got 3");
     fails_with(&["env", "rollout", "--env", "Hopper-v5", "--actions", "/nonexistent.csv"], "cannot read /nonexistent.csv");
 }
+
+#[test]
+fn eval_says_how_long_episodes_last_and_what_each_term_pays() {
+    // A barely trained Hopper policy falls early: every step before the fall pays the healthy
+    // reward of 1 (v5 pays nothing on the step it falls), and the terms add up to the return.
+    let dir = TempDir::new("cli-eval");
+    let policy = dir.join("ppo");
+    let out = idrex(&["train", "ppo", "--env", "Hopper-v5", "--steps", "2048", "--eval-every", "0", "--out", policy.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = idrex(&["eval", "--policy", policy.to_str().unwrap(), "--episodes", "3", "--json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_str(stdout(&out).trim()).unwrap();
+    let f = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k} in {v}"));
+    assert!(f("length") > 1.0 && f("length") < 1000.0, "{v}");
+    assert!((f("survive") - (f("length") - 1.0)).abs() < 1e-9, "{v}");
+    let sum = f("forward") + f("ctrl") + f("survive") + f("contact");
+    assert!((sum - f("mean")).abs() < 1e-6 * f("mean").abs().max(1.0), "{v}");
+    assert!(f("ctrl") < 0.0 && f("contact") == 0.0, "{v}");
+    assert_eq!(v["earned_by"], "moving", "a policy that falls early is not living: {v}");
+}

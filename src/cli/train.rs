@@ -7,6 +7,8 @@ use clap::{Args, Subcommand};
 
 use crate::algo::ppo;
 use crate::env::EnvId;
+use crate::pipeline::stage::RolloutSummary;
+use crate::report::terms::EarnedBy;
 
 #[derive(Debug, Subcommand)]
 pub enum TrainCommand {
@@ -127,16 +129,31 @@ pub fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{} does not name its environment; pass --env", args.policy.display()))?;
     let id: EnvId = name.parse()?;
     let evaluating = crate::log::progress::Activity::start(format!("eval: {} episodes of {id}", args.episodes));
-    let stats = ppo::evaluate(&policy, id, args.episodes, args.seed, args.mean)?;
+    let episodes = ppo::evaluation_episodes(&policy, id, args.episodes, args.seed, args.mean)?;
     drop(evaluating);
+    let summary = RolloutSummary::of(&episodes).with_terms(&episodes);
+    let (stats, terms) = (&summary.stats, summary.terms.as_ref().expect("with_terms"));
+    let per_episode = |v: &[f64]| crate::stats::mean(v).unwrap_or(f64::NAN);
+    let lengths: Vec<f64> = summary.lengths.iter().map(|&n| n as f64).collect();
+    let (length, forward, ctrl, survive, contact) = (
+        per_episode(&lengths),
+        per_episode(&terms.forward),
+        per_episode(&terms.ctrl),
+        per_episode(&terms.survive),
+        per_episode(&terms.contact),
+    );
+    let earned_by = EarnedBy::of(id, length, forward, survive).name();
     if args.json {
         println!(
             "{}",
-            serde_json::json!({"env": id.name(), "policy": args.policy, "acting": if args.mean { "mean" } else { "sampled" }, "mean": stats.mean, "std": stats.std, "min": stats.min, "max": stats.max, "episodes": stats.episodes})
+            serde_json::json!({"env": id.name(), "policy": args.policy, "acting": if args.mean { "mean" } else { "sampled" },
+                "mean": stats.mean, "std": stats.std, "min": stats.min, "max": stats.max, "episodes": stats.episodes,
+                "length": length, "forward": forward, "ctrl": ctrl, "survive": survive, "contact": contact, "earned_by": earned_by})
         );
     } else {
         println!(
-            "{id}: return {:.1} +- {:.1} (min {:.1}, max {:.1}) over {} episodes",
+            "{id}: return {:.1} +- {:.1} (min {:.1}, max {:.1}) over {} episodes of {length:.0} steps on average; \
+             per episode forward {forward:.1}, control {ctrl:.1}, healthy {survive:.1}, contact {contact:.1}: {earned_by}",
             stats.mean, stats.std, stats.min, stats.max, stats.episodes
         );
     }

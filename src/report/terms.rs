@@ -25,6 +25,13 @@ pub enum EarnedBy {
 }
 
 impl EarnedBy {
+    /// From the episodes' mean length and mean forward and healthy reward per episode.
+    pub fn of(env: EnvId, length: f64, forward: f64, survive: f64) -> EarnedBy {
+        let spec = env.spec();
+        let living = spec.health.is_some() && length >= LIVING_LENGTH * spec.max_episode_steps as f64 && forward < LIVING_FORWARD * survive;
+        if living { EarnedBy::Living } else { EarnedBy::Moving }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             EarnedBy::Moving => "moving",
@@ -178,10 +185,6 @@ fn ranked_of(arts: &Artifacts, store: Option<&Store>, key: &str) -> Option<(f64,
 fn row(env: EnvId, pipeline: String, method: String, s: &Sums) -> TermRow {
     let per_episode = |i: usize| s.terms[i] / s.episodes as f64;
     let length = s.steps as f64 / s.episodes as f64;
-    let spec = env.spec();
-    let living = spec.health.is_some()
-        && length >= LIVING_LENGTH * spec.max_episode_steps as f64
-        && per_episode(1) < LIVING_FORWARD * per_episode(3);
     TermRow {
         env: env.name().to_string(),
         pipeline,
@@ -196,7 +199,7 @@ fn row(env: EnvId, pipeline: String, method: String, s: &Sums) -> TermRow {
         learned_per_step: s.learned.map(|(sum, n)| sum / n.max(1) as f64),
         ranked_best_per_step: s.ranked.map(|r| r.0),
         ranked_worst_per_step: s.ranked.map(|r| r.1),
-        earned_by: if living { EarnedBy::Living } else { EarnedBy::Moving },
+        earned_by: EarnedBy::of(env, length, per_episode(1), per_episode(3)),
     }
 }
 
@@ -322,4 +325,21 @@ pub fn living(rows: &[TermRow]) -> String {
         return String::new();
     }
     format!("**Earned by living, not by moving** (how each method earns its return, below):\n\n{}\n", lines.concat())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn living_needs_a_task_that_ends_long_episodes_and_little_forward() {
+        // Ant standing for 1000 steps and creeping: living; walking at a quarter of its healthy
+        // reward or more, or falling before half the limit: moving.
+        assert_eq!(EarnedBy::of(EnvId::Ant, 1000.0, 100.0, 1000.0), EarnedBy::Living);
+        assert_eq!(EarnedBy::of(EnvId::Ant, 1000.0, 250.0, 1000.0), EarnedBy::Moving);
+        assert_eq!(EarnedBy::of(EnvId::Ant, 499.0, 0.0, 499.0), EarnedBy::Moving);
+        assert_eq!(EarnedBy::of(EnvId::Ant, 500.0, 0.0, 500.0), EarnedBy::Living);
+        // HalfCheetah never ends: its return is always earned by moving.
+        assert_eq!(EarnedBy::of(EnvId::HalfCheetah, 1000.0, -10.0, 0.0), EarnedBy::Moving);
+    }
 }

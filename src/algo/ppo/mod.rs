@@ -27,7 +27,7 @@ pub use buffer::RolloutBuffer;
 pub use files::{checkpoint_dir, checkpoints, write_curve};
 use scaling::{Normalisers, scaled_rewards};
 
-use crate::data::{RunningMeanStd, TrajMeta};
+use crate::data::{RunningMeanStd, TrajMeta, Trajectory};
 use crate::env::{Env, EnvId, Horizon, VecEnv};
 use crate::error::{Error, Result};
 use crate::nn::policy::CpuPolicy;
@@ -396,12 +396,16 @@ fn variance(v: &[f32]) -> f64 {
 /// Ground-truth returns of `episodes` episodes of the stochastic policy (or its mean action,
 /// `mean`; frozen normalisation), episode k from a reset seeded with `seed + k`.
 pub fn evaluate(policy: &ActorCritic, id: EnvId, episodes: usize, seed: u64, mean: bool) -> Result<ReturnStats> {
+    let returns: Vec<f64> = evaluation_episodes(policy, id, episodes, seed, mean)?.iter().map(Trajectory::ret).collect();
+    Ok(ReturnStats::of(&returns))
+}
+
+/// The episodes [`evaluate`] scores, whole (lengths and reward terms for `idrex eval`).
+pub fn evaluation_episodes(policy: &ActorCritic, id: EnvId, episodes: usize, seed: u64, mean: bool) -> Result<Vec<Trajectory>> {
     let mut env = Env::new(id)?;
     policy.expect_dims(env.obs_dim(), env.act_dim(), id.name())?;
     let mut actor = PolicyActor::new(policy.to_cpu(), !mean);
-    let returns: Vec<f64> =
-        (0..episodes).map(|k| rollout::episode(&mut env, &mut actor, seed.wrapping_add(k as u64), TrajMeta::default()).ret()).collect();
-    Ok(ReturnStats::of(&returns))
+    Ok((0..episodes).map(|k| rollout::episode(&mut env, &mut actor, seed.wrapping_add(k as u64), TrajMeta::default())).collect())
 }
 
 #[cfg(test)]
