@@ -17,7 +17,10 @@ p.add_argument("--state", required=True)
 p.add_argument("--actions", required=True)
 args = p.parse_args()
 
-env = gym.make(args.env)
+# idrex's names for Gymnasium's tasks made with options other than their defaults.
+OPTIONS = {"Ant-v5-no-cfrc": ("Ant-v5", {"include_cfrc_ext_in_observation": False})}
+gym_id, options = OPTIONS.get(args.env, (args.env, {}))
+env = gym.make(gym_id, **options)
 env.reset(seed=0)  # starts the TimeLimit counter; the state is then overwritten
 with open(args.state) as f:
     state = json.load(f)

@@ -140,3 +140,16 @@ fn ant_matches_gymnasium_contact_forces_included() {
         assert_eq!(trunc, len == 1000, "{p:?}: truncated exactly at the 1000-step limit");
     }
 }
+
+#[test]
+fn ant_matches_gymnasium_contact_forces_left_out_of_the_observation() {
+    // gym.make("Ant-v5", include_cfrc_ext_in_observation=False): 27 observations, the contact
+    // cost still in the reward.
+    assert_eq!(Env::new(EnvId::AntNoCfrc).unwrap().obs_dim(), 27);
+    for (i, p) in [Pattern::Random, Pattern::OutOfBounds].into_iter().enumerate() {
+        let steps = if i == 0 { 1000 } else { 300 };
+        let (len, term, trunc) = compare(EnvId::AntNoCfrc, p, steps, 51 + i as u64);
+        assert!(len == steps || term, "{p:?}: {len} steps, neither the whole run nor a termination");
+        assert_eq!(trunc, len == 1000, "{p:?}: truncated exactly at the 1000-step limit");
+    }
+}

@@ -159,7 +159,7 @@ pub fn measure_env(id: EnvId, args: &EnvBenchArgs) -> anyhow::Result<EnvBench> {
 
 /// The environments a run measures: those named, else all.
 pub fn ids(args: &EnvBenchArgs) -> Vec<EnvId> {
-    if args.envs.is_empty() { EnvId::ALL.to_vec() } else { args.envs.clone() }
+    if args.envs.is_empty() { EnvId::TASKS.to_vec() } else { args.envs.clone() }
 }
 
 /// The table of idrex's environments against mj_step and Gymnasium.

@@ -44,10 +44,15 @@ pub enum EnvId {
     Walker2d,
     #[serde(rename = "Ant-v5")]
     Ant,
+    /// `Ant-v5` with `include_cfrc_ext_in_observation=False` (27 observations).
+    #[serde(rename = "Ant-v5-no-cfrc")]
+    AntNoCfrc,
 }
 
 impl EnvId {
-    pub const ALL: [EnvId; 4] = [EnvId::HalfCheetah, EnvId::Hopper, EnvId::Walker2d, EnvId::Ant];
+    pub const ALL: [EnvId; 5] = [EnvId::HalfCheetah, EnvId::Hopper, EnvId::Walker2d, EnvId::Ant, EnvId::AntNoCfrc];
+    /// Gymnasium's four tasks at their default options (what `bench env` measures).
+    pub const TASKS: [EnvId; 4] = [EnvId::HalfCheetah, EnvId::Hopper, EnvId::Walker2d, EnvId::Ant];
 
     pub fn name(self) -> &'static str {
         self.spec().name
@@ -59,6 +64,7 @@ impl EnvId {
             EnvId::Hopper => &hopper::SPEC,
             EnvId::Walker2d => &walker2d::SPEC,
             EnvId::Ant => &ant::SPEC,
+            EnvId::AntNoCfrc => &ant::SPEC_NO_CFRC,
         }
     }
 }
@@ -218,7 +224,7 @@ impl Env {
     /// qpos without its first `obs_skip_qpos` entries, qvel, and where the task observes
     /// them, the contact forces of every body but the world (6 each).
     pub fn obs_dim(&self) -> usize {
-        let contact = if self.spec.contact.is_some() { 6 * (self.nbody - 1) } else { 0 };
+        let contact = if self.spec.contact.is_some_and(|c| c.observed) { 6 * (self.nbody - 1) } else { 0 };
         self.nq() - self.spec.obs_skip_qpos + self.nv() + contact
     }
     pub fn action_bounds(&self) -> (&[f64], &[f64]) {
@@ -292,7 +298,7 @@ impl Env {
                 *v = v.clamp(-c, c);
             }
         }
-        if let Some(c) = self.spec.contact {
+        if let Some(c) = self.spec.contact.filter(|c| c.observed) {
             let (lo, hi) = c.force_range;
             let forces = self.data.cfrc_ext()[1..].iter().flatten();
             for (o, f) in obs[np + qvel.len()..].iter_mut().zip(forces) {
@@ -455,9 +461,13 @@ mod tests {
 
     #[test]
     fn dimensions_match_gymnasium() {
-        for (id, obs, act, dt) in
-            [(EnvId::HalfCheetah, 17, 6, 0.05), (EnvId::Hopper, 11, 3, 0.008), (EnvId::Walker2d, 17, 6, 0.008), (EnvId::Ant, 105, 8, 0.05)]
-        {
+        for (id, obs, act, dt) in [
+            (EnvId::HalfCheetah, 17, 6, 0.05),
+            (EnvId::Hopper, 11, 3, 0.008),
+            (EnvId::Walker2d, 17, 6, 0.008),
+            (EnvId::Ant, 105, 8, 0.05),
+            (EnvId::AntNoCfrc, 27, 8, 0.05),
+        ] {
             let env = Env::new(id).unwrap();
             assert_eq!((env.obs_dim(), env.act_dim()), (obs, act), "{id}");
             assert!((env.dt() - dt).abs() < 1e-12, "{id}");

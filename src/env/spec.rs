@@ -31,11 +31,13 @@ pub enum Forward {
 }
 
 /// External contact forces on the bodies (`cfrc_ext`, after `mj_rnePostConstraint`), each
-/// clipped to `force_range`: observed (all bodies but the world) and costed (all bodies).
+/// clipped to `force_range`: costed (all bodies) and, where `observed`, observed (all bodies
+/// but the world; Gymnasium's `include_cfrc_ext_in_observation`).
 #[derive(Debug, Clone, Copy)]
 pub struct Contact {
     pub cost_weight: f64,
     pub force_range: (f64, f64),
+    pub observed: bool,
 }
 
 /// How `reset` perturbs the initial state `qpos0`, `qvel = 0`.

@@ -193,7 +193,7 @@ pub fn default_ctrl_coeff(env: EnvId) -> f64 {
         EnvId::HalfCheetah => 0.1,
         EnvId::Hopper | EnvId::Walker2d => 1e-3,
         // Not in D-REX's code; its rule (each task's control-cost weight) gives Ant's 0.5.
-        EnvId::Ant => 0.5,
+        EnvId::Ant | EnvId::AntNoCfrc => 0.5,
     }
 }
 
@@ -255,7 +255,7 @@ mod tests {
         assert!(err("version: 1\nenv: Hopper-v5\noverrides:\n  drex:\n    ppo:\n      backend: tch\n").contains("ppo.backend tch"));
         assert_eq!(
             err("version: 1\nenv: Hopper-v9\n"),
-            "p.yaml:2:1: unknown environment 'Hopper-v9'; known environments: HalfCheetah-v5, Hopper-v5, Walker2d-v5, Ant-v5; write e.g. `env: Hopper-v5`"
+            "p.yaml:2:1: unknown environment 'Hopper-v9'; known environments: HalfCheetah-v5, Hopper-v5, Walker2d-v5, Ant-v5, Ant-v5-no-cfrc; write e.g. `env: Hopper-v5`"
         );
         assert!(err("version: 1\nenv: Hopper-v5\nppo:\n  total_steps: -5\n").contains("p.yaml:4:16"));
         assert_eq!(

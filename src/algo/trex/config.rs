@@ -137,6 +137,7 @@ mod tests {
             (EnvId::Hopper, 5..11, None),
             (EnvId::Walker2d, 8..17, None),
             (EnvId::Ant, 13..27, Some(0..27)),
+            (EnvId::AntNoCfrc, 13..27, None),
         ] {
             let env = Env::new(id).unwrap();
             assert_eq!(All.seen(&env), None, "{id:?}");
