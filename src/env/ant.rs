@@ -19,6 +19,8 @@
 //! `analysis/results/ant/`).
 use super::{Contact, EnvSpec, Forward, Health, ResetNoise};
 
+const CONTACT: Contact = Contact { cost_weight: 5e-4, force_range: (-1.0, 1.0), observed: true };
+
 pub const SPEC: EnvSpec = EnvSpec {
     name: "Ant-v5",
     xml_file: "ant.xml",
@@ -29,11 +31,10 @@ pub const SPEC: EnvSpec = EnvSpec {
     obs_qvel_clip: None,
     obs_skip_qpos: 2,
     forward: Forward::BodyXpos(1),
-    contact: Some(Contact { cost_weight: 5e-4, force_range: (-1.0, 1.0), observed: true }),
+    contact: Some(CONTACT),
     reset_noise: ResetNoise::UniformGaussian(0.1),
     max_episode_steps: 1000,
 };
 
 /// Ant-v5 with `include_cfrc_ext_in_observation=False`.
-pub const SPEC_NO_CFRC: EnvSpec =
-    EnvSpec { name: "Ant-v5-no-cfrc", contact: Some(Contact { cost_weight: 5e-4, force_range: (-1.0, 1.0), observed: false }), ..SPEC };
+pub const SPEC_NO_CFRC: EnvSpec = EnvSpec { name: "Ant-v5-no-cfrc", contact: Some(Contact { observed: false, ..CONTACT }), ..SPEC };

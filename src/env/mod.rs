@@ -224,7 +224,7 @@ impl Env {
     /// qpos without its first `obs_skip_qpos` entries, qvel, and where the task observes
     /// them, the contact forces of every body but the world (6 each).
     pub fn obs_dim(&self) -> usize {
-        let contact = if self.spec.contact.is_some_and(|c| c.observed) { 6 * (self.nbody - 1) } else { 0 };
+        let contact = if self.spec.observed_contact().is_some() { 6 * (self.nbody - 1) } else { 0 };
         self.nq() - self.spec.obs_skip_qpos + self.nv() + contact
     }
     pub fn action_bounds(&self) -> (&[f64], &[f64]) {
@@ -298,7 +298,7 @@ impl Env {
                 *v = v.clamp(-c, c);
             }
         }
-        if let Some(c) = self.spec.contact.filter(|c| c.observed) {
+        if let Some(c) = self.spec.observed_contact() {
             let (lo, hi) = c.force_range;
             let forces = self.data.cfrc_ext()[1..].iter().flatten();
             for (o, f) in obs[np + qvel.len()..].iter_mut().zip(forces) {

@@ -67,3 +67,10 @@ pub struct EnvSpec {
     pub reset_noise: ResetNoise,
     pub max_episode_steps: usize,
 }
+
+impl EnvSpec {
+    /// The contact forces, where the observation holds them.
+    pub fn observed_contact(&self) -> Option<Contact> {
+        self.contact.filter(|c| c.observed)
+    }
+}

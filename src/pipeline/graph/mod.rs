@@ -98,7 +98,7 @@ pub(super) fn trex_params(p: &Pipeline, m: Method, sets: Vec<trex::RankedSet>, c
     let mut cfg = p.trex_for(m);
     // On a task without contact forces in its observation, leaving them out changes nothing:
     // the key stays the one without the option.
-    if !p.env.spec().contact.is_some_and(|c| c.observed) && cfg.observation == crate::algo::trex::RewardObservation::WithoutContactForces {
+    if p.env.spec().observed_contact().is_none() && cfg.observation == crate::algo::trex::RewardObservation::WithoutContactForces {
         cfg.observation = crate::algo::trex::RewardObservation::All;
     }
     Params::Trex(trex::TrexParams { env: p.env, trex: cfg, sets, cross_level, device: p.device })

@@ -367,13 +367,13 @@ pub struct DegradationLevel {
     pub n: usize,
 }
 
-/// Per-noise-level mean and std of returns, in increasing noise.
 /// A count a stage key leaves out at 0 (`skip_serializing_if`), so that keys from before the
 /// field existed stay as they were.
 fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
+/// Per-noise-level mean and std of returns, in increasing noise.
 pub fn degradation(trajs: &[Trajectory]) -> Vec<DegradationLevel> {
     let mut levels: BTreeMap<String, (f64, Vec<f64>)> = BTreeMap::new();
     for t in trajs {
