@@ -25,19 +25,24 @@ import numpy as np
 from mcap.reader import make_reader
 
 
+def safetensors(path):
+    """Every f32 tensor of a safetensors file, by name."""
+    raw = open(path, "rb").read()
+    n = struct.unpack("<Q", raw[:8])[0]
+    header = json.loads(raw[8 : 8 + n])
+    return {
+        k: np.frombuffer(raw[8 + n + v["data_offsets"][0] : 8 + n + v["data_offsets"][1]], dtype=np.float32).reshape(v["shape"])
+        for k, v in header.items()
+        if k != "__metadata__"
+    }
+
+
 def load_reward(store, key, members_apart=False):
     """The ensemble's mean raw output, a function of whole observation rows (each member's
     output, members x rows, with `members_apart`)."""
     d = f"{store}/{key}/reward"
     config = json.load(open(f"{d}/reward.json"))["config"]
-    raw = open(f"{d}/reward.safetensors", "rb").read()
-    n = struct.unpack("<Q", raw[:8])[0]
-    header = json.loads(raw[8 : 8 + n])
-    t = {
-        k: np.frombuffer(raw[8 + n + v["data_offsets"][0] : 8 + n + v["data_offsets"][1]], dtype=np.float32).reshape(v["shape"])
-        for k, v in header.items()
-        if k != "__metadata__"
-    }
+    t = safetensors(f"{d}/reward.safetensors")
     start = config.get("obs_offset") or 0
     seen = slice(start, start + config["obs_dim"])
     members = sorted({k.split(".")[0] for k in t})

@@ -13,11 +13,12 @@ Read with Python's `mcap` reader and numpy only (no idrex code).
 """
 import json
 import os
-import struct
 import sys
 
 import numpy as np
 from mcap.reader import make_reader
+
+from reward_features import safetensors
 
 
 def resolve(store, key):
@@ -30,14 +31,7 @@ def resolve(store, key):
 def load_reward(path):
     """The ensemble's mean raw output as a function of input rows, and what a row holds."""
     config = json.load(open(f"{path}/reward/reward.json"))
-    raw = open(f"{path}/reward/reward.safetensors", "rb").read()
-    n = struct.unpack("<Q", raw[:8])[0]
-    header = json.loads(raw[8 : 8 + n])
-    t = {
-        k: np.frombuffer(raw[8 + n + v["data_offsets"][0] : 8 + n + v["data_offsets"][1]], dtype=np.float32).reshape(v["shape"])
-        for k, v in header.items()
-        if k != "__metadata__"
-    }
+    t = safetensors(f"{path}/reward/reward.safetensors")
     members = sorted({k.split(".")[0] for k in t})
     layers = len({k.split(".")[1] for k in t})
     start = config["config"].get("obs_offset") or 0
