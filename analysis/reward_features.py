@@ -39,19 +39,26 @@ def safetensors(path):
 
 def load_reward(store, key, members_apart=False):
     """The ensemble's mean raw output, a function of whole observation rows (each member's
-    output, members x rows, with `members_apart`)."""
+    output, members x rows, with `members_apart`); a reward that reads the action too
+    (`trex.action_input`) takes each row's action as the second argument, after the
+    observation as T-REX fed it."""
     d = f"{store}/{key}/reward"
-    config = json.load(open(f"{d}/reward.json"))["config"]
+    whole = json.load(open(f"{d}/reward.json"))
+    config = whole["config"]
+    with_action = bool(whole.get("hyper", {}).get("trex", {}).get("action_input"))
     t = safetensors(f"{d}/reward.safetensors")
     start = config.get("obs_offset") or 0
     seen = slice(start, start + config["obs_dim"])
     members = sorted({k.split(".")[0] for k in t})
     layers = len({k.split(".")[1] for k in t})
 
-    def reward(x):
+    def reward(x, act=None):
+        if with_action and act is None:
+            raise ValueError(f"{key}: this reward reads the action too; pass each row's action")
+        rows = np.concatenate([x[:, seen], act], axis=1) if with_action else x[:, seen]
         outs = []
         for m in members:
-            h = x[:, seen]
+            h = rows
             for i in range(layers):
                 h = h @ t[f"{m}.l{i}.weight"].T + t[f"{m}.l{i}.bias"]
                 if i < layers - 1:
@@ -60,6 +67,11 @@ def load_reward(store, key, members_apart=False):
         return np.array(outs) if members_apart else np.mean(outs, axis=0)
 
     return reward
+
+
+def forward_velocity_entry(obs_dim):
+    """Where qvel[0] sits: after the positions (HalfCheetah and Walker2d 17, Hopper 11, Ant)."""
+    return 8 if obs_dim == 17 else 5 if obs_dim == 11 else 13
 
 
 def steps(store, key):
@@ -82,7 +94,7 @@ def main():
     x, noise = steps(store, ranked_key)
     r = reward(x)
     config = json.load(open(f"{store}/{reward_key}/reward/reward.json"))["config"]
-    vx = 8 if x.shape[1] == 17 else 5 if x.shape[1] == 11 else 13
+    vx = forward_velocity_entry(x.shape[1])
     print(f"ranked set: {len(x)} steps; the forward velocity is entry {vx} (reads {config['obs_dim']} entries)")
     print("noise  forward velocity  reward per step")
     for level in sorted(set(noise)):

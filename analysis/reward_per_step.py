@@ -18,39 +18,15 @@ import sys
 import numpy as np
 from mcap.reader import make_reader
 
-from reward_features import safetensors
+from reward_features import forward_velocity_entry, load_reward
 
 
 def resolve(store, key):
+    """The one artifact whose key starts with `key`."""
     hits = [d for d in os.listdir(store) if d.startswith(key)]
     if len(hits) != 1:
         sys.exit(f"{key}: {len(hits)} artifacts in {store} start with it; give more of the key")
-    return f"{store}/{hits[0]}"
-
-
-def load_reward(path):
-    """The ensemble's mean raw output as a function of input rows, and what a row holds."""
-    config = json.load(open(f"{path}/reward/reward.json"))
-    t = safetensors(f"{path}/reward/reward.safetensors")
-    members = sorted({k.split(".")[0] for k in t})
-    layers = len({k.split(".")[1] for k in t})
-    start = config["config"].get("obs_offset") or 0
-    seen = slice(start, start + config["config"]["obs_dim"])
-    with_action = bool(config.get("hyper", {}).get("trex", {}).get("action_input"))
-
-    def reward(obs, act):
-        x = np.concatenate([obs[:, seen], act], axis=1) if with_action else obs[:, seen]
-        outs = []
-        for m in members:
-            h = x
-            for i in range(layers):
-                h = h @ t[f"{m}.l{i}.weight"].T + t[f"{m}.l{i}.bias"]
-                if i < layers - 1:
-                    h = np.maximum(h, 0)
-            outs.append(h[:, 0])
-        return np.mean(outs, axis=0)
-
-    return reward
+    return hits[0]
 
 
 def rollout(path):
@@ -66,10 +42,10 @@ def rollout(path):
 
 def main():
     store, reward_key, evals = sys.argv[1], sys.argv[2], sys.argv[3:]
-    reward = load_reward(resolve(store, reward_key))
+    reward = load_reward(store, resolve(store, reward_key))
     for key in evals:
-        obs, act = rollout(resolve(store, key))
-        vx = 8 if obs.shape[1] == 17 else 5 if obs.shape[1] == 11 else 13
+        obs, act = rollout(f"{store}/{resolve(store, key)}")
+        vx = forward_velocity_entry(obs.shape[1])
         print(f"{key[:12]}: reward per step {reward(obs, act).mean():.3f}, forward velocity {obs[:, vx].mean():.2f} m/s")
 
 
