@@ -18,23 +18,12 @@ sidecar's offset.
 HalfCheetah and Walker2d).
 """
 import json
-import struct
 import sys
 
 import numpy as np
 from mcap.reader import make_reader
 
-
-def safetensors(path):
-    """Every f32 tensor of a safetensors file, by name."""
-    raw = open(path, "rb").read()
-    n = struct.unpack("<Q", raw[:8])[0]
-    header = json.loads(raw[8 : 8 + n])
-    return {
-        k: np.frombuffer(raw[8 + n + v["data_offsets"][0] : 8 + n + v["data_offsets"][1]], dtype=np.float32).reshape(v["shape"])
-        for k, v in header.items()
-        if k != "__metadata__"
-    }
+from demo_diagnosis import load_safetensors
 
 
 def load_reward(store, key, members_apart=False):
@@ -46,7 +35,7 @@ def load_reward(store, key, members_apart=False):
     whole = json.load(open(f"{d}/reward.json"))
     config = whole["config"]
     with_action = bool(whole.get("hyper", {}).get("trex", {}).get("action_input"))
-    t = safetensors(f"{d}/reward.safetensors")
+    t = load_safetensors(f"{d}/reward.safetensors")
     start = config.get("obs_offset") or 0
     seen = slice(start, start + config["obs_dim"])
     members = sorted({k.split(".")[0] for k in t})
