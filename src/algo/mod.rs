@@ -1,5 +1,6 @@
 //! The learning algorithms: behavioural cloning, noise injection, T-REX and PPO, and the
 //! scoring and selection that evaluation and multi-BC decide with.
+pub mod bank;
 pub mod bc;
 pub mod noise;
 pub mod ppo;

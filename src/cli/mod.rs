@@ -1,6 +1,7 @@
 //! The command line: clap definitions and a thin function per command, one file per command
 //! group; the work is done by library functions. `anyhow` lives at the binary's edge: here,
 //! `main.rs` and the benchmarks (`bench`, commands too); the library returns [`crate::Error`].
+mod bank;
 mod env;
 mod exp;
 mod logs;
@@ -103,6 +104,9 @@ pub enum Command {
     /// The store's studies at a glance (`show`), and two of them side by side (`diff`).
     #[command(subcommand)]
     Exp(exp::ExpCommand),
+    /// The reward bench: score learned rewards on their task's bank of gaits.
+    #[command(subcommand)]
+    Bank(bank::BankCommand),
 }
 
 #[derive(Debug, Subcommand)]
@@ -182,5 +186,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Logs(cmd) => logs::run(&cmd),
         Command::Report(args) => report::run(&args),
         Command::Exp(cmd) => exp::run(&cmd),
+        Command::Bank(cmd) => bank::run(&cmd),
     }
 }

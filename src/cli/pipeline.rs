@@ -70,6 +70,11 @@ pub struct RunArgs {
     /// Recompute these nodes even if stored (repeatable).
     #[arg(long)]
     pub force: Vec<String>,
+    /// Compute only these nodes and what they read (repeatable): a node's name, or a name's
+    /// end for every replicate's (`--target drex/trex/bank-score` scores D-REX's rewards on
+    /// the bank without running PPO).
+    #[arg(long, value_name = "NODE")]
+    pub target: Vec<String>,
     /// Run only this replicate of the file's (its stages' keys are those of the whole file's
     /// run), so that a long study lands one replicate at a time.
     #[arg(long, value_name = "R")]
@@ -337,9 +342,10 @@ fn plan(args: &PlanArgs) -> anyhow::Result<()> {
         let path: Vec<&str> = path.iter().filter(|n| !stored(&keys[n.as_str()])).map(String::as_str).collect();
         let guessed: Vec<&str> = crate::pipeline::stage::StageKind::ALL.iter().filter(|k| !est.measured(**k)).map(|k| k.name()).collect();
         println!(
-            "\nestimated: {:.1} min of stage time left, critical path {:.1} min; with {cores} jobs at least {:.1} min",
+            "\nestimated: {:.1} min of stage time left, critical path {:.1} min; with {} at least {:.1} min",
             total / 60.0,
             cp / 60.0,
+            crate::pipeline::runner::jobs_phrase(cores),
             cp.max(total / cores as f64) / 60.0
         );
         if !path.is_empty() {
@@ -360,6 +366,7 @@ fn pipeline_run(args: &RunArgs) -> anyhow::Result<()> {
     };
     let p = &sweep.file;
     let g = sweep.graph()?;
+    let g = if args.target.is_empty() { g } else { g.up_to(&args.target).map_err(|e| anyhow::anyhow!("{}: {e}", args.file.display()))? };
     let manifests = store.unverified_manifests()?;
     let present: std::collections::BTreeSet<&str> = manifests.iter().map(|m| m.key.as_str()).collect();
     let mut archived = Vec::new();

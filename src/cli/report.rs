@@ -17,6 +17,16 @@ pub enum ReportFormat {
     Json,
 }
 
+/// What the command prints when it has written the report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Print {
+    /// The whole markdown report.
+    All,
+    /// The answer, then where the report, the page, the recordings and the store are.
+    Answer,
+    Nothing,
+}
+
 #[derive(Debug, Args)]
 pub struct ReportArgs {
     /// Artifact store directory or `s3://bucket/prefix`.
@@ -48,6 +58,9 @@ pub struct ReportArgs {
     /// return (a pipeline file's `eval.bc_warning`).
     #[arg(long, default_value_t = crate::algo::scoring::BC_WARNING)]
     pub bc_warning: f64,
+    /// What to print on the terminal (the files are written the same).
+    #[arg(long, value_enum, default_value_t = Print::All)]
+    pub print: Print,
 }
 
 pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
@@ -135,6 +148,31 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<()> {
         std::fs::write(&page, html::page(&md, &args.out, &links)).with_context(|| format!("cannot write {}", page.display()))?;
         eprintln!("wrote {}", page.display());
     }
-    print!("{md}");
+    match args.print {
+        Print::All => print!("{md}"),
+        Print::Answer => print!("{}{}", crate::report::answer_markdown(&t), whereabouts(args)),
+        Print::Nothing => {}
+    }
     Ok(())
+}
+
+/// Where everything the run and the report wrote is, for the end of a terminal answer.
+fn whereabouts(args: &ReportArgs) -> String {
+    let mut lines = vec![String::from("\nWhere everything is:")];
+    let mut add = |path: std::path::PathBuf, what: &str| {
+        if path.exists() {
+            lines.push(format!("  {:<44} {what}", path.display()));
+        }
+    };
+    add(args.out.join("report.md"), "every table and figure (the CSV files beside it)");
+    add(args.out.join("report.html"), "the report as one page, for a browser");
+    for r in &args.recording {
+        add(r.clone(), "the plots: .idrex/venv/bin/rerun FILE");
+    }
+    if !args.store.starts_with("s3://") {
+        add(std::path::PathBuf::from(&args.store), "the store: idrex exp show --store DIR");
+    } else {
+        lines.push(format!("  {:<44} the store: idrex exp show --store URL", args.store));
+    }
+    lines.join("\n") + "\n"
 }

@@ -32,6 +32,9 @@ kinds! {
     InterpolationRollouts = "interpolation-rollouts",
     ActionNoiseRollouts = "action-noise-rollouts",
     MultiBcRollouts = "multi-bc-rollouts",
+    BankPolicy = "bank-policy",
+    Bank = "bank",
+    BankScore = "bank-score",
 }
 
 impl StageKind {

@@ -220,7 +220,13 @@ fn plot_node(rec: &Recording, n: &super::graph::Node, m: &Metrics, gathered: &mu
                 entry.2.extend(&acc.predicted_returns);
             }
         }
-        Metrics::Demonstrator(_) | Metrics::Demos(_) | Metrics::DemosImport(_) | Metrics::Bc(_) => {}
+        Metrics::Demonstrator(_)
+        | Metrics::Demos(_)
+        | Metrics::DemosImport(_)
+        | Metrics::Bc(_)
+        | Metrics::BankPolicy(_)
+        | Metrics::Bank(_)
+        | Metrics::BankScore(_) => {}
     }
 }
 

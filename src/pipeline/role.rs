@@ -29,6 +29,11 @@ pub enum Role {
     Floor,
     /// Multi-BC's held-out reward, trained on the previous iteration's rankings.
     Judge,
+    /// The reward bench: PPO's checkpoints on the task's reward, and on its backward twin.
+    Forward,
+    Backward,
+    /// The reward bench's bank of gaits.
+    Bank,
     /// The i-th input of a series.
     Nth(Series, usize),
 }
@@ -68,7 +73,7 @@ impl Series {
 }
 
 impl Role {
-    const SINGLE: [Role; 5] = [Role::Policy, Role::Demos, Role::Reward, Role::Floor, Role::Judge];
+    const SINGLE: [Role; 8] = [Role::Policy, Role::Demos, Role::Reward, Role::Floor, Role::Judge, Role::Forward, Role::Backward, Role::Bank];
 
     /// The name keys and manifests record.
     pub fn name(self) -> String {
@@ -78,6 +83,9 @@ impl Role {
             Role::Reward => "reward".into(),
             Role::Floor => "floor".into(),
             Role::Judge => "judge".into(),
+            Role::Forward => "forward".into(),
+            Role::Backward => "backward".into(),
+            Role::Bank => "bank".into(),
             Role::Nth(s, i) => format!("{}{i}", s.prefix()),
         }
     }

@@ -10,7 +10,7 @@ use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde_json::Value;
 
 use super::graph::{Graph, Node};
-use super::stage::{Inputs, StageCtx};
+use super::stage::{Inputs, StageCtx, StageKind};
 use crate::error::{Error, Result};
 use crate::store::{Manifest, Store, TestSetMark, now_unix};
 
@@ -134,7 +134,7 @@ fn run_node(
             wall_s,
             idrex_version: crate::VERSION.to_string(),
             kernel: Some(node.params.cpu_path()),
-            test_set: mark.filter(|_| node.kind() == super::stage::StageKind::Eval).cloned(),
+            test_set: mark.filter(|_| node.kind() == StageKind::Eval).cloned(),
         };
         store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })
@@ -183,7 +183,7 @@ pub fn intent(sweep: &super::Sweep, manifests: &[Manifest], g: &Graph, opts: &Ru
     }
     let to_compute = g.nodes.iter().filter(|n| todo(n)).count();
     format!(
-        "{}: {} on {}, {} RL runs per method, K = {}{replicates}: {} stages, {to_compute} to compute; about {} with {} jobs (from {source})",
+        "{}: {} on {}, {} RL runs per method, K = {}{replicates}: {} stages, {to_compute} to compute; about {} with {} (from {source})",
         p.name,
         methods.join(", "),
         envs.join(", "),
@@ -191,8 +191,13 @@ pub fn intent(sweep: &super::Sweep, manifests: &[Manifest], g: &Graph, opts: &Ru
         p.spec.iterations,
         g.nodes.len(),
         minutes(wall),
-        opts.jobs
+        jobs_phrase(opts.jobs)
     )
+}
+
+/// "1 job", "2 jobs".
+pub fn jobs_phrase(jobs: usize) -> String {
+    if jobs == 1 { "1 job".into() } else { format!("{jobs} jobs") }
 }
 
 /// A duration for people: seconds under a minute, else whole minutes.
@@ -212,8 +217,8 @@ struct Board<'g> {
     status: BTreeMap<String, Status>,
     running: BTreeMap<String, usize>,
     since: BTreeMap<String, Instant>,
-    taken: f64,
-    estimated: f64,
+    /// Per stage kind, the seconds its computed stages took and were estimated to take.
+    taken: BTreeMap<StageKind, (f64, f64)>,
 }
 
 impl<'g> Board<'g> {
@@ -248,13 +253,24 @@ impl<'g> Board<'g> {
         ready
     }
 
-    /// How long the rest should take with `jobs`, each estimate scaled by `scale`.
-    fn left(&self, jobs: usize, scale: f64) -> f64 {
+    /// How far off this run's stages of `kind` were: taken over estimated, once half a minute
+    /// of that kind's estimated work has run, else 1. Per kind, so that fast early stages
+    /// (demonstrations, BC) never shrink the estimate of kinds that have not run yet (PPO).
+    fn scale(&self, kind: StageKind) -> f64 {
+        match self.taken.get(&kind) {
+            Some(&(taken, estimated)) if estimated > 30.0 => (taken / estimated).clamp(0.25, 4.0),
+            _ => 1.0,
+        }
+    }
+
+    /// How long the rest should take with `jobs`, each estimate scaled by its kind's
+    /// [`Board::scale`].
+    fn left(&self, jobs: usize) -> f64 {
         let cost = |n: &Node| {
             if self.status.contains_key(&n.name) || self.reused.contains(&n.name) {
                 0.0
             } else {
-                let est = self.estimates.seconds(n) * scale;
+                let est = self.estimates.seconds(n) * self.scale(n.kind());
                 self.since.get(&n.name).map_or(est, |t| (est - t.elapsed().as_secs_f64()).max(0.0))
             }
         };
@@ -265,14 +281,13 @@ impl<'g> Board<'g> {
     fn ended(&mut self, name: &str, s: Status, jobs: usize) -> String {
         self.running.remove(name);
         if let (Status::Computed { wall_s }, Some(n)) = (&s, self.graph.get(name)) {
-            self.taken += wall_s;
-            self.estimated += self.estimates.seconds(n);
+            let t = self.taken.entry(n.kind()).or_default();
+            t.0 += wall_s;
+            t.1 += self.estimates.seconds(n);
         }
         self.since.remove(name);
         self.status.insert(name.to_string(), s);
-        // Calibrated once a minute of estimated work has run: short stages say little.
-        let scale = if self.estimated > 60.0 { (self.taken / self.estimated).clamp(0.25, 4.0) } else { 1.0 };
-        format!("about {} left", minutes(self.left(jobs, scale)))
+        format!("about {} left", minutes(self.left(jobs)))
     }
 }
 
@@ -330,10 +345,9 @@ pub fn run(graph: &Graph, store: &Store, opts: &RunOptions, body: &StageBody) ->
         status: BTreeMap::new(),
         running: BTreeMap::new(),
         since: BTreeMap::new(),
-        taken: 0.0,
-        estimated: 0.0,
+        taken: BTreeMap::new(),
     };
-    overall.set_message(format!("about {} left", minutes(board.left(jobs, 1.0))));
+    overall.set_message(format!("about {} left", minutes(board.left(jobs))));
     let (tx, rx) = mpsc::channel::<(String, Status)>();
     std::thread::scope(|scope| {
         loop {

@@ -28,6 +28,12 @@ fn work(params: &Params) -> f64 {
         Params::Eval(p) => p.episodes,
         Params::Demos(p) => p.episodes,
         Params::DemosImport(_) => 1,
+        Params::BankPolicy(p) => p.ppo.total_steps,
+        Params::Bank(p) => {
+            let per_checkpoint = p.episodes + (p.epsilon.len() + p.smooth.len()) * p.disturbed;
+            per_checkpoint * 12 + p.still + p.random
+        }
+        Params::BankScore(_) => 1,
     };
     n.max(1) as f64
 }
@@ -36,7 +42,7 @@ fn work(params: &Params) -> f64 {
 /// settings, `--jobs 2`), for kinds the store has no artifact of.
 fn reference_rate(kind: StageKind) -> f64 {
     match kind {
-        StageKind::Ppo | StageKind::Demonstrator => 65.0 / 1e6,
+        StageKind::Ppo | StageKind::Demonstrator | StageKind::BankPolicy => 65.0 / 1e6,
         StageKind::Bc => 80.0 / 50_000.0,
         StageKind::MultiBcRollouts => 220.0 / 150_100.0,
         StageKind::Trex => 160.0 / 9_000.0,
@@ -45,6 +51,9 @@ fn reference_rate(kind: StageKind) -> f64 {
         StageKind::Eval => 12.0 / 20.0,
         StageKind::Demos => 0.5,
         StageKind::DemosImport => 0.01,
+        // Rollouts of 1000 steps with no reward model.
+        StageKind::Bank => 0.15,
+        StageKind::BankScore => 3.0,
     }
 }
 

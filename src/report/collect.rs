@@ -43,6 +43,10 @@ struct AccuracyRunRow {
     spearman_over_checkpoints: f64,
     pearson_over_checkpoints: f64,
     pearson_ssrr: f64,
+    /// The reward's scores on its task's bank ([`super::bank`]), NaN where unscored.
+    bank_spearman: f64,
+    bank_forward_spearman: f64,
+    bank_overpaid: Option<f64>,
     /// How much of its learned reward the ceiling capped, in the PPO run behind the policy.
     reward_capped: Option<f64>,
 }
@@ -79,9 +83,10 @@ struct Gathered {
 
 pub(super) fn collect(store: &Artifacts) -> Result<Long> {
     let ssrr = terms::ssrr_pearson(store);
+    let bank = super::bank::scores(store);
     let mut g = Gathered::default();
     for (m, p, x) in store.evaluations() {
-        g.add(store, &ssrr, m, p, x)?;
+        g.add(store, (&ssrr, &bank), m, p, x)?;
     }
     if let Some(((e, study), sources)) = g.demo_sources.iter().find(|(_, s)| s.len() > 1) {
         let sources: Vec<&str> = sources.iter().map(String::as_str).collect();
@@ -99,7 +104,7 @@ impl Gathered {
     fn add(
         &mut self,
         store: &Artifacts,
-        ssrr: &BTreeMap<(String, String), f64>,
+        (ssrr, bank): (&BTreeMap<(String, String), f64>, &BTreeMap<String, crate::algo::bank::BankScore>),
         m: &Manifest,
         p: &EvalParams,
         x: &EvalMetrics,
@@ -128,6 +133,7 @@ impl Gathered {
         if let Some(acc) = &x.reward {
             let reward = input_key(m, Role::Reward).cloned().unwrap_or_default();
             let ppo = store.input(m, Role::Policy).and_then(|pm| store.typed(pm));
+            let scored = bank.get(&reward);
             self.accuracy.push(AccuracyRunRow {
                 env: env.clone(),
                 table: table.label.clone(),
@@ -138,6 +144,9 @@ impl Gathered {
                 spearman_over_checkpoints: over_checkpoints(&x.checkpoints, spearman),
                 pearson_over_checkpoints: over_checkpoints(&x.checkpoints, pearson),
                 pearson_ssrr: ssrr.get(&(reward, table.label.clone())).copied().unwrap_or(f64::NAN),
+                bank_spearman: scored.map_or(f64::NAN, |s| s.spearman),
+                bank_forward_spearman: scored.map_or(f64::NAN, |s| s.forward_spearman),
+                bank_overpaid: scored.map(|s| s.overpaid.iter().sum::<usize>() as f64),
                 reward_capped: match ppo {
                     Some(Typed { metrics: Metrics::Ppo(x), .. }) => x.reward_capped,
                     _ => None,
@@ -190,6 +199,9 @@ impl Gathered {
                 Col::SpearmanOverCheckpoints.column(a, |r| r.spearman_over_checkpoints),
                 Col::PearsonOverCheckpoints.column(a, |r| r.pearson_over_checkpoints),
                 Col::PearsonSsrr.column(a, |r| r.pearson_ssrr),
+                Col::BankSpearman.column(a, |r| r.bank_spearman),
+                Col::BankForwardSpearman.column(a, |r| r.bank_forward_spearman),
+                Col::BankOverpaid.column(a, |r| r.bank_overpaid),
                 Col::RewardCapped.column(a, |r| r.reward_capped),
             ])?,
             runs: self.runs,

@@ -28,6 +28,9 @@ pub(super) enum Col {
     SpearmanOverCheckpoints,
     PearsonOverCheckpoints,
     PearsonSsrr,
+    BankSpearman,
+    BankForwardSpearman,
+    BankOverpaid,
     RewardCapped,
 }
 
@@ -54,6 +57,9 @@ impl Col {
             Col::SpearmanOverCheckpoints => "spearman_over_checkpoints",
             Col::PearsonOverCheckpoints => "pearson_over_checkpoints",
             Col::PearsonSsrr => "pearson_ssrr",
+            Col::BankSpearman => "bank_spearman",
+            Col::BankForwardSpearman => "bank_forward_spearman",
+            Col::BankOverpaid => "bank_overpaid",
             Col::RewardCapped => "reward_capped",
         }
     }

@@ -8,6 +8,7 @@
 use std::collections::BTreeMap;
 
 pub mod answer;
+pub mod bank;
 pub mod clones;
 mod collect;
 mod columns;
@@ -43,7 +44,7 @@ pub use notes::notes;
 use protocols::RESAMPLES;
 use protocols::protocol_rows;
 pub use protocols::{Protocol, ProtocolRow, over_checkpoints};
-pub use returns::{AccuracyRow, DemoRow, ReturnRow, markdown};
+pub use returns::{AccuracyRow, DemoRow, ReturnRow, answer_markdown, markdown};
 
 pub(crate) fn pe(e: PolarsError) -> Error {
     Error::Invalid(format!("building the report table: {e}"))
@@ -203,6 +204,10 @@ pub struct Tables {
     /// How each method's final policies earn their return ([`terms::rows`]; read from the
     /// stored rollouts, so filled by the caller that has the store).
     pub terms: Vec<terms::TermRow>,
+    /// Each learned reward's scores on its task's bank ([`bank::rows`]).
+    pub bank: Vec<bank::BankRow>,
+    /// Each method's gain over BC split into the task's terms ([`terms::gains`]).
+    pub gains: Vec<terms::GainRow>,
     /// The studies' questions with Holm's correction, the correlations and the living
     /// counts ([`questions::ask`]; they need the terms, so [`Tables::with_terms`] fills them).
     pub answers: questions::Answers,
@@ -211,6 +216,7 @@ pub struct Tables {
 impl Tables {
     /// Sets the terms and answers the questions that need them.
     pub fn with_terms(&mut self, terms: Vec<terms::TermRow>) {
+        self.gains = terms::gains(&terms);
         self.terms = terms;
         let src =
             questions::Sources { protocols: &self.protocols, terms: &self.terms, demos: &self.demo_returns, accuracy: &self.accuracy };
@@ -241,6 +247,12 @@ impl Tables {
         }
         if !self.terms.is_empty() {
             out.push(("terms", Table::of(&self.terms)));
+        }
+        if !self.gains.is_empty() {
+            out.push(("gains", Table::of(&self.gains)));
+        }
+        if !self.bank.is_empty() {
+            out.push(("bank", Table::of(&self.bank)));
         }
         if !self.answers.questions.is_empty() {
             out.push(("questions", Table::of(&self.answers.questions)));
@@ -282,6 +294,8 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         looks: looks::rows(store),
         bc_warning: crate::algo::scoring::BC_WARNING,
         terms: Vec::new(),
+        bank: bank::rows(store),
+        gains: Vec::new(),
         answers: questions::Answers::default(),
     })
 }
@@ -342,7 +356,18 @@ fn aggregated(long: &collect::Long) -> Result<Frames> {
         .sort([Env.name(), Pipeline.name()], Default::default())
         .collect()
         .map_err(pe)?;
-    let means = [Pearson, Spearman, PairwiseAccuracy, SpearmanOverCheckpoints, PearsonOverCheckpoints, PearsonSsrr, RewardCapped];
+    let means = [
+        Pearson,
+        Spearman,
+        PairwiseAccuracy,
+        SpearmanOverCheckpoints,
+        PearsonOverCheckpoints,
+        PearsonSsrr,
+        BankSpearman,
+        BankForwardSpearman,
+        BankOverpaid,
+        RewardCapped,
+    ];
     let accuracy = long
         .accuracy
         .clone()
@@ -407,6 +432,9 @@ fn accuracy_rows(df: &DataFrame) -> Result<Vec<AccuracyRow>> {
                 spearman_over_checkpoints: value(df, Col::SpearmanOverCheckpoints, i)?,
                 pearson_over_checkpoints: value(df, Col::PearsonOverCheckpoints, i)?,
                 pearson_ssrr: value(df, Col::PearsonSsrr, i)?,
+                bank_spearman: value(df, Col::BankSpearman, i)?,
+                bank_forward_spearman: value(df, Col::BankForwardSpearman, i)?,
+                bank_overpaid: Col::BankOverpaid.f64(df, i)?,
                 reward_capped: Col::RewardCapped.f64(df, i)?,
                 runs: count(df, Col::Runs, i)?,
             })

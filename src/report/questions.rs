@@ -512,6 +512,9 @@ mod tests {
                 spearman_over_checkpoints: 0.0,
                 pearson_over_checkpoints: 0.0,
                 pearson_ssrr: 0.8 + 0.01 * r as f64,
+                bank_spearman: f64::NAN,
+                bank_forward_spearman: f64::NAN,
+                bank_overpaid: None,
                 reward_capped: None,
                 runs: 3,
             })

@@ -47,6 +47,11 @@ pub struct AccuracyRow {
     pub pearson_over_checkpoints: f64,
     /// SSRR's number: [`super::terms::ssrr_pearson`].
     pub pearson_ssrr: f64,
+    /// The reward's Spearman over its task's bank, within its forward gaits, and how many
+    /// backward, still or random gaits it overpays ([`super::bank`]); NaN and None unscored.
+    pub bank_spearman: f64,
+    pub bank_forward_spearman: f64,
+    pub bank_overpaid: Option<f64>,
     /// With `reward.ceiling`: the mean over runs of the fraction of the members' per-step
     /// values PPO trained on that the ceiling capped (None without a ceiling).
     pub reward_capped: Option<f64>,
@@ -98,6 +103,9 @@ impl Row for AccuracyRow {
             "spearman_over_checkpoints",
             "pearson_over_checkpoints",
             "pearson_ssrr",
+            "bank_spearman",
+            "bank_forward_spearman",
+            "bank_overpaid",
             "reward_capped",
             "runs",
         ]
@@ -114,17 +122,26 @@ impl Row for AccuracyRow {
             x(self.spearman_over_checkpoints),
             x(self.pearson_over_checkpoints),
             x(self.pearson_ssrr),
+            Cell::opt(Some(self.bank_spearman).filter(|v| v.is_finite()), 3),
+            Cell::opt(Some(self.bank_forward_spearman).filter(|v| v.is_finite()), 3),
+            Cell::opt(self.bank_overpaid, 1),
             Cell::opt(self.reward_capped, 3),
             Cell::int(self.runs),
         ]
     }
 }
 
-/// The paper-style markdown, the answer first: one row per (env, pipeline).
-pub fn markdown(t: &Tables) -> String {
+/// The answer alone: what a terminal shows after a run (the report's first section).
+pub fn answer_markdown(t: &Tables) -> String {
     let mut out = answer::markdown(&t.protocols, &t.aggregate, &t.improvement, &t.demo_returns, &t.looks, t.bc_warning);
     out.push_str(&super::questions::markdown(&t.answers));
     out.push_str(&super::terms::living(&t.terms));
+    out
+}
+
+/// The paper-style markdown, the answer first: one row per (env, pipeline).
+pub fn markdown(t: &Tables) -> String {
+    let mut out = answer_markdown(t);
     out.push_str(&looks::markdown(&t.looks));
     out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
     out.push_str(&super::sweeps::markdown(&t.sweeps));
@@ -173,7 +190,9 @@ pub fn markdown(t: &Tables) -> String {
         "Over checkpoints: Spearman and Pearson correlation of learned and true return across each PPO run's checkpoints ",
         "(does climbing the learned reward climb the true one?). Pearson, SSRR's way: over every trajectory of the ",
         "reward's ranked sets, the demonstrations and the final policies' evaluation episodes (SSRR's number; SSRR ",
-        "pools checkpoints' rollouts where this pools the final policies'). Capped by the ceiling: the fraction of the learned ",
+        "pools checkpoints' rollouts where this pools the final policies'). Bank: Spearman over the task's bank of gaits, ",
+        "within its forward gaits, and the backward, still or random gaits it pays more than a truly better forward one ",
+        "(the reward bench, below; n/a where the file has no `bank`). Capped by the ceiling: the fraction of the learned ",
         "reward's per-step values PPO trained on that `reward.ceiling` cut (n/a without a ceiling).\n\n",
     ));
     let mut accuracy = Table::of(&t.accuracy);
@@ -187,13 +206,18 @@ pub fn markdown(t: &Tables) -> String {
         "Spearman over checkpoints",
         "Pearson over checkpoints",
         "Pearson, SSRR's way",
+        "bank Spearman",
+        "bank forward Spearman",
+        "bank overpaid",
         "capped by the ceiling",
         "runs",
     ]
     .map(String::from)
     .to_vec();
     out.push_str(&accuracy.markdown());
+    out.push_str(&super::bank::markdown(&t.bank));
     out.push_str(&super::terms::markdown(&t.terms));
+    out.push_str(&super::terms::gains_markdown(&t.gains));
     out.push_str(&protocols_markdown(&t.protocols));
     out.push_str(&clones::markdown(&t.clones));
     out

@@ -327,6 +327,101 @@ pub fn living(rows: &[TermRow]) -> String {
     format!("**Earned by living, not by moving** (how each method earns its return, below):\n\n{}\n", lines.concat())
 }
 
+/// What a method's gain over BC mostly came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GainFrom {
+    Moving,
+    StayingUp,
+    Control,
+    /// No term gained: the method is not above BC.
+    Nothing,
+}
+
+impl GainFrom {
+    pub fn name(self) -> &'static str {
+        match self {
+            GainFrom::Moving => "moving",
+            GainFrom::StayingUp => "staying up",
+            GainFrom::Control => "control",
+            GainFrom::Nothing => "nothing",
+        }
+    }
+}
+
+/// `gains.csv`: a method's return minus BC's in the same table, split into the task's terms
+/// (per episode, final policies): forward (moving), healthy (staying up), control and contact
+/// costs (control).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GainRow {
+    pub env: String,
+    pub pipeline: String,
+    pub method: String,
+    pub ret: f64,
+    pub forward: f64,
+    pub survive: f64,
+    pub control: f64,
+    pub from: GainFrom,
+}
+
+/// Every learned-reward method's gain over BC in its table, split into the terms.
+pub fn gains(rows: &[TermRow]) -> Vec<GainRow> {
+    let bc = crate::pipeline::Method::Bc.name();
+    rows.iter()
+        .filter(|r| r.method != bc && r.method != DEMOS)
+        .filter_map(|r| {
+            let b = rows.iter().find(|b| b.env == r.env && b.pipeline == r.pipeline && b.method == bc)?;
+            let (forward, survive, control) = (r.forward - b.forward, r.survive - b.survive, (r.ctrl + r.contact) - (b.ctrl + b.contact));
+            let parts = [(forward, GainFrom::Moving), (survive, GainFrom::StayingUp), (control, GainFrom::Control)];
+            let best = parts.into_iter().filter(|(v, _)| *v > 0.0).max_by(|a, b| a.0.total_cmp(&b.0));
+            Some(GainRow {
+                env: r.env.clone(),
+                pipeline: r.pipeline.clone(),
+                method: r.method.clone(),
+                ret: r.ret - b.ret,
+                forward,
+                survive,
+                control,
+                from: best.map_or(GainFrom::Nothing, |(_, f)| f),
+            })
+        })
+        .collect()
+}
+
+impl Row for GainRow {
+    fn header() -> Vec<&'static str> {
+        vec!["env", "pipeline", "method", "return", "forward", "survive", "control", "mostly_from"]
+    }
+    fn cells(&self) -> Vec<Cell> {
+        vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.method),
+            Cell::num(self.ret),
+            Cell::num(self.forward),
+            Cell::num(self.survive),
+            Cell::num(self.control),
+            Cell::text(self.from.name()),
+        ]
+    }
+}
+
+/// The report's section on the gains.
+pub fn gains_markdown(rows: &[GainRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from(concat!(
+        "\n## Each method's gain over BC, by term (final policies, per episode)\n\n",
+        "The method's mean return minus BC's in the same table, split into the task's terms: forward (moving), ",
+        "healthy (staying up) and the control and contact costs (control); mostly from: the term that gained most.\n\n",
+    ));
+    let mut table = crate::log::table::Table::of(rows);
+    table.columns =
+        ["env", "pipeline", "method", "gain", "from moving", "from staying up", "from control", "mostly from"].map(String::from).to_vec();
+    out.push_str(&table.markdown());
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -341,5 +436,34 @@ mod tests {
         assert_eq!(EarnedBy::of(EnvId::Ant, 500.0, 0.0, 500.0), EarnedBy::Living);
         // HalfCheetah never ends: its return is always earned by moving.
         assert_eq!(EarnedBy::of(EnvId::HalfCheetah, 1000.0, -10.0, 0.0), EarnedBy::Moving);
+    }
+
+    /// The second locked set's Walker2d: "moving" by the label, yet its gain over BC came
+    /// mostly from staying up (+616 healthy, +210 forward).
+    #[test]
+    fn a_gain_is_split_into_its_terms() {
+        let row = |method: &str, forward: f64, survive: f64, ctrl: f64| TermRow {
+            env: "Walker2d-v5".into(),
+            pipeline: "p".into(),
+            method: method.into(),
+            episodes: 20,
+            length: 900.0,
+            ret: forward + survive + ctrl,
+            forward,
+            ctrl,
+            survive,
+            contact: 0.0,
+            learned_per_step: None,
+            ranked_best_per_step: None,
+            ranked_worst_per_step: None,
+            earned_by: EarnedBy::Moving,
+        };
+        let rows = [row("bc", 529.6, 269.0, -2.0), row("drex", 739.6, 885.0, -5.0), row("idrex-multi-bc", 400.0, 269.0, -1.0)];
+        let g = gains(&rows);
+        assert_eq!(g.len(), 2);
+        assert!((g[0].forward - 210.0).abs() < 1e-9 && (g[0].survive - 616.0).abs() < 1e-9 && (g[0].control + 3.0).abs() < 1e-9);
+        assert_eq!(g[0].from, GainFrom::StayingUp);
+        assert!((g[0].ret - (g[0].forward + g[0].survive + g[0].control)).abs() < 1e-9);
+        assert_eq!(g[1].from, GainFrom::Control);
     }
 }

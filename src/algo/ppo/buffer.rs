@@ -14,6 +14,9 @@ pub struct RolloutBuffer {
     pub logp: Vec<f32>,
     pub values: Vec<f32>,
     pub env_rewards: Vec<f64>,
+    /// The forward term of each environment reward (what [`super::RewardSource::Backward`]
+    /// turns around).
+    pub env_forward: Vec<f64>,
     /// Raw next observations and the clipped actions, what a learned reward reads.
     pub raw_next: Vec<f32>,
     pub clipped_actions: Vec<f32>,
@@ -36,6 +39,7 @@ impl RolloutBuffer {
             logp: vec![0.0; batch],
             values: vec![0.0; batch],
             env_rewards: vec![0.0; batch],
+            env_forward: vec![0.0; batch],
             raw_next: vec![0.0; batch * obs_dim],
             clipped_actions: vec![0.0; batch * act_dim],
             terminated: vec![false; batch],

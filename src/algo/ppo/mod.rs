@@ -147,6 +147,9 @@ impl Default for PpoConfig {
 #[allow(clippy::large_enum_variant)] // one per run, never moved in a loop.
 pub enum RewardSource {
     GroundTruth,
+    /// The task's reward with its forward term negated: the same costs and healthy reward,
+    /// progress paid backwards (the reward bench's backward gaits).
+    Backward,
     Learned { model: RewardEnsemble, composition: Composition },
 }
 
@@ -297,7 +300,7 @@ pub fn train(
     phases.other_s = wall_s - phases.env_s - phases.policy_s - phases.reward_s - phases.update_s;
     let reward_capped = match &reward {
         RewardSource::Learned { model, .. } => model.capped_fraction(),
-        RewardSource::GroundTruth => None,
+        RewardSource::GroundTruth | RewardSource::Backward => None,
     };
     Ok(PpoResult { policy: agent, curve, wall_s, phases, reward_capped })
 }
@@ -371,6 +374,7 @@ fn collect(
         for i in 0..n {
             let k = t * n + i;
             buf.env_rewards[k] = step.rewards[i];
+            buf.env_forward[k] = step.infos[i].terms.reward_forward;
             buf.terminated[k] = step.terminated[i];
             buf.truncated[k] = step.truncated[i];
             let next = step.final_obs[i].as_deref().unwrap_or(&step.obs[i * od..(i + 1) * od]);

@@ -35,6 +35,7 @@ pub(super) fn scaled_rewards(
     let n = episode_learned.len();
     let mut rewards: Vec<f64> = match reward {
         RewardSource::GroundTruth => buf.env_rewards.clone(),
+        RewardSource::Backward => buf.env_rewards.iter().zip(&buf.env_forward).map(|(r, f)| r - 2.0 * f).collect(),
         RewardSource::Learned { model, composition } => {
             let cost_actions = match composition.ctrl_action {
                 CtrlAction::Clipped => &buf.clipped_actions,

@@ -8,6 +8,7 @@
 //!        iD-REX iteration k: rollouts from the iteration's policies ─> <variant>/k<k>/trex
 //!                             ─> <variant>/k<k>/ppo/<r> ─> <variant>/k<k>/eval/<r>
 //! ```
+pub mod bank;
 pub mod idrex;
 
 use std::collections::BTreeMap;
@@ -79,6 +80,28 @@ impl Graph {
             })
             .collect();
         Graph { nodes }
+    }
+
+    /// The nodes named by `targets` and every node they (transitively) read, in the graph's
+    /// order: what `pipeline run --target` computes. A target names a node, or every node
+    /// whose name ends with `/target` (`drex/trex` is each replicate's); one that names none
+    /// is refused.
+    pub fn up_to(&self, targets: &[String]) -> Result<Graph, String> {
+        let mut keep: std::collections::BTreeSet<&str> = Default::default();
+        for t in targets {
+            let hit: Vec<&str> =
+                self.nodes.iter().filter(|n| n.name == *t || n.name.ends_with(&format!("/{t}"))).map(|n| n.name.as_str()).collect();
+            if hit.is_empty() {
+                return Err(format!("--target {t}: no node of the pipeline is named so (`idrex pipeline plan` lists them)"));
+            }
+            keep.extend(hit);
+        }
+        for n in self.nodes.iter().rev() {
+            if keep.contains(n.name.as_str()) {
+                keep.extend(n.inputs.iter().map(|(_, i)| i.as_str()));
+            }
+        }
+        Ok(Graph { nodes: self.nodes.iter().filter(|n| keep.contains(n.name.as_str())).cloned().collect() })
     }
 
     /// The nodes that (transitively) depend on `name`, including itself.
@@ -175,9 +198,14 @@ fn expand_all(p: &Pipeline) -> crate::Result<Graph> {
             if p.is_replicated() {
                 prefix.push_str(&format!("r{r}/"));
             }
-            let named = |n: &str| format!("{prefix}{n}");
+            // The bank is the task's, not a replicate's: one per environment.
+            let env_prefix = if p.is_study() { format!("{}/", env.name()) } else { String::new() };
+            let named = |n: &str| if bank::is_bank(n) { format!("{env_prefix}{n}") } else { format!("{prefix}{n}") };
             for n in sub.nodes {
                 let inputs = n.inputs.map(|src| named(src));
+                if bank::is_bank(&n.name) && g.get(&named(&n.name)).is_some() {
+                    continue;
+                }
                 g.push(named(&n.name), n.params, n.seed, inputs);
             }
         }
@@ -185,8 +213,17 @@ fn expand_all(p: &Pipeline) -> crate::Result<Graph> {
     Ok(g)
 }
 
-/// The graph of one environment's pipeline.
+/// The graph of one environment's pipeline: its methods' stages, and with `bank`, the reward
+/// bench's and a score of every learned reward on it.
 pub fn expand_one(p: &Pipeline) -> crate::Result<Graph> {
+    let mut g = expand_methods(p)?;
+    if let Some(cfg) = &p.spec.bank {
+        bank::expand(&mut g, p.env, cfg);
+    }
+    Ok(g)
+}
+
+fn expand_methods(p: &Pipeline) -> crate::Result<Graph> {
     let s = &p.spec;
     let env = p.env;
     let mut g = Graph::default();

@@ -24,6 +24,10 @@
 //! | interpolation-rollouts | 1 | `policy<r>, older<r>` | rollouts.mcap | idrex/interpolation.rs |
 //! | action-noise-rollouts | 1 | `policy<r>` | rollouts.mcap | idrex/action_noise.rs |
 //! | multi-bc-rollouts | 4 | `policy<r>, baseline<i>, reward, judge?, demos, eval<r>` | rollouts.mcap, clones.mcap | idrex/multi_bc.rs |
+//! | bank-policy | 1 | - | policy/, checkpoints/ | bank.rs |
+//! | bank | 1 | forward, backward | rollouts.mcap, bank.json | bank.rs |
+//! | bank-score | 1 | reward, bank | - | bank.rs |
+pub mod bank;
 pub mod bc;
 pub mod demos;
 pub mod eval;
@@ -138,6 +142,7 @@ macro_rules! stage_kinds {
 
 pub use super::inputs::NoInputs;
 use super::inputs::{Named, StageInputs};
+pub use bank::{BankPolicyInputs, ScoreInputs};
 pub use bc::BcInputs;
 pub use demos::DemosInputs;
 pub use eval::EvalInputs;
@@ -160,6 +165,9 @@ stage_kinds! {
     InterpolationRollouts: idrex::interpolation::Params => DegradationMetrics, InterpolationInputs, idrex::interpolation::run;
     ActionNoiseRollouts: idrex::action_noise::Params => DegradationMetrics, ActionNoiseInputs, idrex::action_noise::run;
     MultiBcRollouts: idrex::multi_bc::Params => idrex::multi_bc::Metrics, MultiBcInputs, idrex::multi_bc::run;
+    BankPolicy: bank::BankPolicyParams => bank::BankPolicyMetrics, NoInputs, bank::policy;
+    Bank: bank::BankParams => bank::BankMetrics, BankPolicyInputs, bank::run;
+    BankScore: bank::ScoreParams => crate::algo::bank::BankScore, ScoreInputs, bank::score;
 }
 
 impl<T> Inputs<T> {

@@ -1,0 +1,166 @@
+//! The reward bench in the report: every learned reward PPO trained on, scored on its task's
+//! bank of gaits before PPO ran ([`crate::algo::bank`]), per (env, table, method), beside
+//! what PPO then made of it.
+use std::collections::BTreeMap;
+
+use super::{Artifacts, input_key, method_label};
+use crate::algo::bank::{BankScore, GaitClass};
+use crate::log::table::{Cell, Row, Table};
+use crate::pipeline::role::Role;
+use crate::pipeline::stage::{Metrics, StageKind, Typed};
+
+/// Each scored reward (its T-REX artifact's key) and its scores.
+pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
+    arts.iter()
+        .filter(|m| m.kind == StageKind::BankScore.name())
+        .filter_map(|m| match arts.typed(m)? {
+            Typed { metrics: Metrics::BankScore(s), .. } => Some((input_key(m, Role::Reward)?.clone(), s.clone())),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `bank.csv`: one row per (env, table, method) whose reward was scored; several rewards (an
+/// iterated method's) are averaged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BankRow {
+    pub env: String,
+    pub pipeline: String,
+    pub method: String,
+    pub rewards: usize,
+    pub trajectories: usize,
+    pub pearson: f64,
+    pub spearman: f64,
+    pub forward_pearson: f64,
+    pub forward_spearman: f64,
+    /// Per class of [`GaitClass::ALL`] past forward: trajectories paid more than a truly
+    /// better forward gait (summed over the rewards).
+    pub overpaid: [usize; 3],
+    pub misordered: f64,
+    /// Learned reward per step on each class of [`GaitClass::ALL`] (NaN where absent).
+    pub pay: [f64; 4],
+}
+
+impl BankRow {
+    pub fn pays_a_wrong_gait(&self) -> bool {
+        self.overpaid.iter().any(|&n| n > 0)
+    }
+}
+
+pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
+    let scored = scores(arts);
+    let mut groups: BTreeMap<(String, String, String), BTreeMap<String, &BankScore>> = BTreeMap::new();
+    for (m, p, _) in arts.evaluations() {
+        let Some(k) = input_key(m, Role::Reward) else { continue };
+        let Some(s) = scored.get(k) else { continue };
+        let id = (p.env.name().to_string(), p.table(), method_label(p.method, p.iteration));
+        groups.entry(id).or_default().insert(k.clone(), s);
+    }
+    groups.into_iter().map(|((env, pipeline, method), by_reward)| row(env, pipeline, method, by_reward.values().copied().collect())).collect()
+}
+
+fn row(env: String, pipeline: String, method: String, s: Vec<&BankScore>) -> BankRow {
+    let mean = |f: &dyn Fn(&BankScore) -> f64| s.iter().map(|x| f(x)).sum::<f64>() / s.len() as f64;
+    let pay = |class: GaitClass| {
+        let v: Vec<f64> = s.iter().filter_map(|x| x.per_class.iter().find(|c| c.class == class)).map(|c| c.learned_per_step).collect();
+        if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+    };
+    let overpaid = |class: GaitClass| s.iter().map(|x| x.overpaid_of(class)).sum();
+    BankRow {
+        env,
+        pipeline,
+        method,
+        rewards: s.len(),
+        trajectories: s.first().map_or(0, |x| x.trajectories),
+        pearson: mean(&|x| x.pearson),
+        spearman: mean(&|x| x.spearman),
+        forward_pearson: mean(&|x| x.forward_pearson),
+        forward_spearman: mean(&|x| x.forward_spearman),
+        overpaid: [overpaid(GaitClass::Backward), overpaid(GaitClass::Still), overpaid(GaitClass::Random)],
+        misordered: mean(&|x| x.misordered),
+        pay: GaitClass::ALL.map(pay),
+    }
+}
+
+impl Row for BankRow {
+    fn header() -> Vec<&'static str> {
+        vec![
+            "env",
+            "pipeline",
+            "method",
+            "rewards",
+            "trajectories",
+            "pearson",
+            "spearman",
+            "forward_pearson",
+            "forward_spearman",
+            "overpaid_backward",
+            "overpaid_still",
+            "overpaid_random",
+            "misordered",
+            "pay_forward",
+            "pay_backward",
+            "pay_still",
+            "pay_random",
+        ]
+    }
+    fn cells(&self) -> Vec<Cell> {
+        let x = |v: f64| Cell::opt(Some(v).filter(|v| v.is_finite()), 3);
+        let mut out = vec![
+            Cell::text(&self.env),
+            Cell::text(&self.pipeline),
+            Cell::text(&self.method),
+            Cell::int(self.rewards),
+            Cell::int(self.trajectories),
+            x(self.pearson),
+            x(self.spearman),
+            x(self.forward_pearson),
+            x(self.forward_spearman),
+        ];
+        out.extend(self.overpaid.iter().map(|&n| Cell::int(n)));
+        out.push(x(self.misordered));
+        out.extend(self.pay.iter().map(|&v| x(v)));
+        out
+    }
+}
+
+/// The report's section.
+pub fn markdown(rows: &[BankRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from(concat!(
+        "\n## The reward bench: each learned reward on its task's bank of gaits, before PPO\n\n",
+        "The bank (`bank:` in the pipeline file) holds PPO checkpoints on the true reward (forward gaits, slow to fast) ",
+        "and on it with the forward term negated (backward gaits), each as it acts, jerky (epsilon-greedy) and smooth ",
+        "(Ornstein-Uhlenbeck), beside the zero action (still) and uniform random actions; no ranked set holds any of them. ",
+        "Pearson and Spearman: learned against true return over the bank, and within the forward gaits (does it order ",
+        "speed?). Overpaid: backward, still and random trajectories the reward pays more than a forward gait the true ",
+        "return ranks above them; misordered: the share of such pairs it orders the wrong way. Pay: the learned reward ",
+        "per step on each class.\n\n",
+    ));
+    let mut table = Table::of(rows);
+    table.columns = [
+        "env",
+        "pipeline",
+        "method",
+        "rewards",
+        "trajectories",
+        "Pearson",
+        "Spearman",
+        "forward Pearson",
+        "forward Spearman",
+        "overpaid backward",
+        "overpaid still",
+        "overpaid random",
+        "misordered",
+        "pay forward",
+        "pay backward",
+        "pay still",
+        "pay random",
+    ]
+    .map(String::from)
+    .to_vec();
+    out.push_str(&table.markdown());
+    out
+}
