@@ -1,6 +1,7 @@
 //! Integration tests: one binary (linking libtorch once), one module per topic.
 mod util;
 
+mod bank;
 mod bench;
 mod bootstrap;
 mod clone_filter;

@@ -46,6 +46,8 @@ pub enum Disturbance {
     Epsilon,
     /// Ornstein-Uhlenbeck noise on the mean action: smooth, temporally correlated.
     Smooth,
+    /// No noise at all: the checkpoint's mean action, its calmest version.
+    MeanAction,
 }
 
 impl Disturbance {
@@ -54,6 +56,7 @@ impl Disturbance {
             Disturbance::None => "none",
             Disturbance::Epsilon => "epsilon",
             Disturbance::Smooth => "smooth",
+            Disturbance::MeanAction => "mean-action",
         }
     }
 }

@@ -2,6 +2,7 @@
 //! documented here once (`docs/pipelines.md` is checked against them). Reading and checking
 //! a file is [`crate::pipeline::load`].
 pub mod error;
+mod bank;
 mod idrex;
 pub mod schema;
 pub mod settings;
@@ -14,6 +15,7 @@ use crate::env::{EnvId, Horizon};
 use crate::nn::DeviceChoice;
 use crate::nn::reward::{Combine, CtrlAction, RewardLevel};
 use crate::rollout::Acting;
+pub use bank::BankConfig;
 pub use idrex::{CloneConfig, CloneFilter, CloneLabels, CloneSource, IdrexConfig, SourceActing};
 
 pub const SCHEMA_VERSION: u32 = 1;
@@ -207,54 +209,6 @@ pub struct EvalConfig {
 impl Default for EvalConfig {
     fn default() -> Self {
         EvalConfig { episodes: 20, bc_warning: crate::algo::scoring::BC_WARNING }
-    }
-}
-
-/// The reward bench's bank of gaits (`analysis/results/reward-bench/`): PPO checkpoints on
-/// the task's reward (forward gaits, slow to fast) and on it with the forward term negated
-/// (backward gaits), each rolled out as it acts, with jerky (epsilon-greedy) and with smooth
-/// (Ornstein-Uhlenbeck) noise; the zero action (standing, or slumping) and uniform random
-/// actions (flailing, falling). PPO runs at CleanRL's settings whatever the file's `ppo`.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct BankConfig {
-    /// PPO steps of the forward gaits' run.
-    pub steps: usize,
-    /// PPO steps of the backward gaits' run.
-    pub backward_steps: usize,
-    /// Checkpoints of each run, evenly spaced, the last at its end.
-    pub checkpoints: usize,
-    pub backward_checkpoints: usize,
-    /// Episodes of each checkpoint as it acts.
-    pub episodes: usize,
-    /// Epsilon-greedy levels around each checkpoint's mean action.
-    pub epsilon: Vec<f64>,
-    /// Ornstein-Uhlenbeck sigmas around each checkpoint's mean action.
-    pub smooth: Vec<f64>,
-    /// Episodes per checkpoint at each epsilon and sigma.
-    pub disturbed: usize,
-    /// Episodes of the zero action, and of uniform random actions.
-    pub still: usize,
-    pub random: usize,
-    /// The bank's seed (its PPO runs and episodes), apart from every study's.
-    pub seed: u64,
-}
-
-impl Default for BankConfig {
-    fn default() -> Self {
-        BankConfig {
-            steps: 1_000_000,
-            backward_steps: 500_000,
-            checkpoints: 6,
-            backward_checkpoints: 3,
-            episodes: 2,
-            epsilon: vec![0.25, 0.5],
-            smooth: vec![0.3, 0.6],
-            disturbed: 1,
-            still: 3,
-            random: 3,
-            seed: 7_000_000,
-        }
     }
 }
 

@@ -33,7 +33,7 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
     }
     let run = |steps: usize, objective: Objective, checkpoints: usize| {
         let ppo = PpoConfig { total_steps: steps, horizon: Horizon::Task, ..PpoConfig::default() };
-        Params::BankPolicy(BankPolicyParams { env: gait_env(env), ppo, objective, checkpoints })
+        Params::BankPolicy(BankPolicyParams { env: gait_env(env), ppo, objective, checkpoints, first: cfg.first })
     };
     let forward = g.push("bank/forward", run(cfg.steps, Objective::Forward, cfg.checkpoints), cfg.seed, Inputs::BankPolicy(NoInputs::default()));
     let backward = g.push(
@@ -50,6 +50,7 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
         disturbed: cfg.disturbed,
         still: cfg.still,
         random: cfg.random,
+        mean: cfg.mean,
     };
     let bank = g.push("bank/gaits", Params::Bank(params), cfg.seed, Inputs::Bank(BankPolicyInputs { forward, backward }));
     for reward in rewards {

@@ -38,8 +38,31 @@ pub struct BankPolicyParams {
     pub env: EnvId,
     pub ppo: PpoConfig,
     pub objective: Objective,
-    /// Checkpoints kept, evenly spaced over the run, the last at its end.
+    /// Checkpoints kept: evenly spaced over the run, or with `first`, geometrically from
+    /// that fraction of the run to its end (slow gaits then span more of the bank).
     pub checkpoints: usize,
+    /// Absent from the key when evenly spaced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub first: Option<f64>,
+}
+
+/// The updates after which a run of `updates` keeps its policy: `n` evenly spaced (the first
+/// one interval in), or geometric from `first` of the run to its end.
+pub fn kept_updates(updates: usize, n: usize, first: Option<f64>) -> Vec<usize> {
+    let n = n.max(1);
+    let mut out: Vec<usize> = match first {
+        None => {
+            let every = (updates / n).max(1);
+            (1..=updates).filter(|u| u % every == 0).collect()
+        }
+        Some(f) => {
+            let start = (f * updates as f64).round().max(1.0);
+            let ratio = if n > 1 { (updates as f64 / start).powf(1.0 / (n - 1) as f64) } else { 1.0 };
+            (0..n).map(|k| if k + 1 == n { updates } else { (start * ratio.powi(k as i32)).round() as usize }).collect()
+        }
+    };
+    out.dedup();
+    out
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -54,7 +77,10 @@ pub struct BankPolicyMetrics {
 pub fn policy(p: &BankPolicyParams, _: &NoInputs<PathBuf>, ctx: &StageCtx) -> Result<BankPolicyMetrics> {
     let mut cfg = p.ppo.clone();
     let updates = cfg.total_steps / (cfg.num_envs * cfg.num_steps).max(1);
-    cfg.checkpoint_every = (updates / p.checkpoints.max(1)).max(1);
+    let keep = kept_updates(updates, p.checkpoints, p.first);
+    // PPO offers the policy every `checkpoint_every` updates (recorded in each policy's
+    // sidecar, so evenly spaced banks keep their interval); the save keeps those of `keep`.
+    cfg.checkpoint_every = if p.first.is_none() { (updates / p.checkpoints.max(1)).max(1) } else { 1 };
     let mut show = ppo_progress(ctx, cfg.total_steps);
     let mut on_update = |u: &ppo::PpoProgress| {
         show(u);
@@ -62,11 +88,9 @@ pub fn policy(p: &BankPolicyParams, _: &NoInputs<PathBuf>, ctx: &StageCtx) -> Re
     };
     let hyper = serde_json::to_value(&cfg).unwrap_or_default();
     let batch = cfg.num_envs * cfg.num_steps;
-    let first = cfg.checkpoint_every * batch;
     let mut kept = Vec::new();
-    // PPO also offers the policy after its first update: a bank gait starts one interval in.
     let mut save = |policy: &ActorCritic, step: usize| {
-        if step < first {
+        if !keep.contains(&(step / batch)) {
             return Ok(());
         }
         kept.push(step);
@@ -100,6 +124,10 @@ pub struct BankParams {
     /// Episodes of the zero action and of uniform random actions.
     pub still: usize,
     pub random: usize,
+    /// Episodes of each checkpoint acting with its mean action, its calmest version (absent
+    /// from the key at 0).
+    #[serde(default, skip_serializing_if = "super::is_zero")]
+    pub mean: usize,
 }
 
 /// The bank's entries, beside its rollout file, in its order.
@@ -175,6 +203,7 @@ pub fn run(p: &BankParams, inputs: &BankPolicyInputs<PathBuf>, ctx: &StageCtx) -
             let len = policy.config.obs_dim;
             let mean = || Prefix { inner: PolicyActor::mean_of(&policy), len };
             roll(&mut env, &mut Prefix { inner: PolicyActor::acting(&policy), len }, p.episodes, class, Disturbance::None, 0.0, step);
+            roll(&mut env, &mut mean(), p.mean, class, Disturbance::MeanAction, 0.0, step);
             for &eps in &p.epsilon {
                 let mut a = EpsilonGreedy { inner: mean(), eps, degraded: UniformActor::of(&env) };
                 roll(&mut env, &mut a, p.disturbed, class, Disturbance::Epsilon, eps, step);
