@@ -443,6 +443,47 @@ mod tests {
         Ok(serde_json::json!({ "value": v }))
     }
 
+    /// Fast early stages of one kind never shrink what the stages of another kind, not run
+    /// yet, are known to cost: after a 50x-too-fast first stage, the rest is still estimated
+    /// at least at the unrun stage's own estimate (issue 78: "8 min left" after the
+    /// demonstrations with every PPO run still to come).
+    #[test]
+    fn the_estimate_left_never_falls_below_the_unrun_kinds_cost() {
+        let demos = Node {
+            name: "later".into(),
+            params: Params::DemosImport(crate::pipeline::stage::demos::ImportParams {
+                env: crate::env::EnvId::Hopper,
+                path: "d.npz".into(),
+                sha256: "0".repeat(64),
+            }),
+            seed: 0,
+            inputs: Inputs::DemosImport(Default::default()),
+        };
+        let mut first = node("first", 1000, &[], 0, false);
+        if let Params::ActionNoiseRollouts(p) = &mut first.params {
+            p.sigmas = vec![0.5];
+        }
+        let g = Graph { nodes: vec![first.clone(), demos.clone()] };
+        let estimates = super::super::schedule::Estimates::default();
+        let mut board = Board {
+            graph: &g,
+            keys: g.keys(),
+            reused: BTreeSet::new(),
+            estimates: estimates.clone(),
+            status: BTreeMap::new(),
+            running: BTreeMap::new(),
+            since: BTreeMap::new(),
+            taken: BTreeMap::new(),
+        };
+        let before = board.left(1);
+        let first_est = estimates.seconds(&first);
+        assert!(first_est > 30.0, "a first stage long enough to calibrate on: {first_est}");
+        board.ended("first", Status::Computed { wall_s: first_est / 50.0 }, 1);
+        assert_eq!(board.scale(first.kind()), 0.25);
+        assert_eq!(board.left(1), estimates.seconds(&demos), "the unrun kind keeps its estimate");
+        assert!(board.left(1) < before);
+    }
+
     fn opts(force: &[&str]) -> RunOptions {
         RunOptions { jobs: 2, force: force.iter().map(|s| s.to_string()).collect(), progress: false, test_set: None }
     }

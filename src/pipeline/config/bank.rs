@@ -14,6 +14,7 @@ pub struct BankConfig {
     pub backward_steps: usize,
     /// Checkpoints of each run, evenly spaced, the last at its end.
     pub checkpoints: usize,
+    /// Checkpoints of the backward run, spaced as the forward run's.
     pub backward_checkpoints: usize,
     /// Space the checkpoints geometrically from this fraction of each run to its end (more
     /// slow gaits), instead of evenly.
@@ -29,8 +30,9 @@ pub struct BankConfig {
     pub smooth: Vec<f64>,
     /// Episodes per checkpoint at each epsilon and sigma.
     pub disturbed: usize,
-    /// Episodes of the zero action, and of uniform random actions.
+    /// Episodes of the zero action.
     pub still: usize,
+    /// Episodes of uniform random actions.
     pub random: usize,
     /// The bank's seed (its PPO runs and episodes), apart from every study's.
     pub seed: u64,

@@ -58,3 +58,58 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
         g.push(format!("{reward}/bank-score"), Params::BankScore(ScoreParams { env }), cfg.seed, inputs);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::Pipeline;
+    use crate::pipeline::graph::expand;
+
+    fn graph(text: &str) -> Graph {
+        expand(&Pipeline::parse(std::path::Path::new("p.yaml"), text).unwrap()).unwrap()
+    }
+
+    const BASE: &str = "version: 1\nenv: Hopper-v5\nseeds: [0, 1]\nnoise:\n  schedule: [0.0, 0.5, 1.0]\nbank: {}\n";
+
+    /// The bank is the task's: its keys ignore the seeds and every other stage's settings,
+    /// follow its own, and a replicated file or a study holds one per environment, with a score
+    /// beside every T-REX node.
+    #[test]
+    fn the_bank_is_the_tasks_and_scores_every_reward() {
+        let bank_keys = |g: &Graph| -> Vec<String> {
+            let keys = g.keys();
+            g.nodes.iter().filter(|n| is_bank(&n.name)).map(|n| keys[&n.name].clone()).collect()
+        };
+        let base = graph(BASE);
+        assert_eq!(bank_keys(&base).len(), 3);
+        let other = graph(&format!("{}trex:\n  iterations: 77\n", BASE.replace("seeds: [0, 1]", "seeds: [5, 6, 7]")));
+        assert_eq!(bank_keys(&other), bank_keys(&base), "seeds and T-REX settings leave the bank alone");
+        assert_ne!(bank_keys(&graph(&BASE.replace("bank: {}", "bank: {steps: 4096}"))), bank_keys(&base));
+        let trex = base.nodes.iter().filter(|n| n.kind() == StageKind::Trex).count();
+        assert_eq!(base.nodes.iter().filter(|n| n.kind() == StageKind::BankScore).count(), trex);
+        // Three replicates: one bank, a score per replicate's reward.
+        let three = graph(&format!("{BASE}replicates: 3\n"));
+        assert_eq!(bank_keys(&three), bank_keys(&base));
+        assert_eq!(three.nodes.iter().filter(|n| n.kind() == StageKind::BankScore).count(), 3 * trex);
+        // A study: each environment its own bank; no bank without a learned reward.
+        let study = graph(&format!("{}replicates: 2\n", BASE.replace("env: Hopper-v5", "env: [Hopper-v5, Walker2d-v5]")));
+        assert_eq!(study.nodes.iter().filter(|n| n.kind() == StageKind::Bank).count(), 2);
+        assert!(study.get("Walker2d-v5/bank/gaits").is_some() && study.get("Walker2d-v5/r1/drex/trex/bank-score").is_some());
+        assert!(graph(&format!("{BASE}methods: [bc]\n")).nodes.iter().all(|n| !is_bank(&n.name)));
+        // Ant-v5's gaits are trained where idrex's PPO walks.
+        let ant = graph(&BASE.replace("Hopper-v5", "Ant-v5"));
+        assert!(matches!(&ant.get("bank/forward").unwrap().params, Params::BankPolicy(p) if p.env == EnvId::AntNoCfrc));
+        assert!(matches!(&ant.get("bank/gaits").unwrap().params, Params::Bank(p) if p.env == EnvId::Ant));
+    }
+
+    /// `--target` keeps the named nodes and what they read, nothing else.
+    #[test]
+    fn a_target_runs_what_it_reads_and_no_more() {
+        let g = graph(&format!("{BASE}replicates: 2\n"));
+        let up = g.up_to(&["drex/trex/bank-score".to_string()]).unwrap();
+        assert!(up.nodes.iter().all(|n| n.kind() != StageKind::Ppo && n.kind() != StageKind::Eval), "no PPO, no evaluation");
+        assert!(up.get("r1/drex/trex/bank-score").is_some() && up.get("bank/forward").is_some() && up.get("r0/bc").is_some());
+        assert!(up.keys().iter().all(|(n, k)| g.keys()[n] == *k), "the same keys as the whole file's");
+        assert!(g.up_to(&["nope".to_string()]).unwrap_err().contains("no node of the pipeline is named so"));
+    }
+}
