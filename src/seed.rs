@@ -36,6 +36,8 @@ pub enum Purpose {
     ZeroActionSet,
     /// `noise.still`: the k-th episode of the zero action ranked below every noise level.
     StillSet,
+    /// `noise.disturbance: weights`: the k-th level's perturbation of BC's weights.
+    WeightNoise,
 }
 
 /// The seed of stream `index` for `purpose`, from the stage seed `seed`.
@@ -54,6 +56,7 @@ pub fn derive(seed: u64, purpose: Purpose, index: u64) -> u64 {
         Purpose::ActorNoise => seed ^ 0x9e37_79b9_7f4a_7c15,
         Purpose::ZeroActionSet => episode(seed ^ 0x2e70, index),
         Purpose::StillSet => episode(seed ^ 0x5711, index),
+        Purpose::WeightNoise => episode(seed ^ 0x3e16, index),
     }
 }
 
@@ -65,7 +68,7 @@ mod tests {
     /// Every purpose, in declaration order. `position` below is an exhaustive match, so a new
     /// variant does not compile until it has a position there; list it here too (nothing
     /// fails where it is missing: the tests then leave it out).
-    const ALL: [Purpose; 13] = [
+    const ALL: [Purpose; 14] = [
         Purpose::Episode,
         Purpose::EvalEpisode,
         Purpose::Source,
@@ -79,6 +82,7 @@ mod tests {
         Purpose::ActorNoise,
         Purpose::ZeroActionSet,
         Purpose::StillSet,
+        Purpose::WeightNoise,
     ];
 
     fn position(p: Purpose) -> usize {
@@ -96,6 +100,7 @@ mod tests {
             Purpose::ActorNoise => 10,
             Purpose::ZeroActionSet => 11,
             Purpose::StillSet => 12,
+            Purpose::WeightNoise => 13,
         }
     }
 

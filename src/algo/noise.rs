@@ -58,6 +58,64 @@ impl NoiseToward {
     }
 }
 
+/// How D-REX's ranked rollouts are disturbed (`noise.disturbance`); each level of the schedule
+/// is the disturbance's scale, and a larger one ranks lower.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Disturbance {
+    /// Epsilon-greedy (D-REX's): each step, with probability epsilon, the `toward` action.
+    #[default]
+    Epsilon,
+    /// Ornstein-Uhlenbeck noise on BC's mean action (theta 0.15, dt 0.01), its stationary
+    /// standard deviation the level: smooth, no step-to-step jitter.
+    Ou,
+    /// Gaussian noise of standard deviation the level, redrawn every 10 steps and held.
+    Held,
+    /// BC's own weights perturbed (each layer's at the level times its weights' RMS), one
+    /// perturbed policy per level acting with its mean: another gait, not a jittered one.
+    Weights,
+}
+
+impl Disturbance {
+    pub fn is_epsilon(&self) -> bool {
+        *self == Disturbance::Epsilon
+    }
+}
+
+/// `per_level` rollouts at each level of `schedule`, disturbed as `kind` says (not epsilon,
+/// which [`degrade`] does); the k-th level's perturbed weights from `derive(seed,
+/// WeightNoise, k)`.
+pub fn disturb(
+    env: &mut Env,
+    policy: &ActorCritic,
+    schedule: &[f64],
+    per_level: usize,
+    seed: u64,
+    meta: &TrajMeta,
+    kind: Disturbance,
+) -> Vec<Trajectory> {
+    use rand::SeedableRng;
+    let ad = env.act_dim();
+    // OU's stationary standard deviation is sigma sqrt(dt / (2 theta)).
+    let ou_sigma = |level: f64| level / (1e-2f64 / (2.0 * 0.15)).sqrt();
+    let mut k = 0u64;
+    rollout::at_levels(env, seed, schedule, per_level, meta, |level| -> Box<dyn Actor> {
+        let mean = PolicyActor::mean_of(policy);
+        k += 1;
+        match kind {
+            Disturbance::Epsilon => unreachable!("epsilon-greedy rollouts are degrade's"),
+            Disturbance::Ou => Box::new(OrnsteinUhlenbeck::new(mean, ou_sigma(level), ad)),
+            Disturbance::Held => Box::new(TimeCorrelated::new(mean, level, 10, ad)),
+            Disturbance::Weights => {
+                let mut rng = ChaCha8Rng::seed_from_u64(crate::seed::derive(seed, crate::seed::Purpose::WeightNoise, k - 1));
+                let mut p = policy.to_cpu();
+                p.actor.perturb_weights(level, &mut rng);
+                Box::new(PolicyActor::new(p, false))
+            }
+        }
+    })
+}
+
 /// D-REX's noise injection: epsilon-greedy rollouts around a policy's mean action, `per_level`
 /// per epsilon of `schedule`.
 pub fn epsilon_greedy(
@@ -341,6 +399,25 @@ mod tests {
         let above_still: Vec<bool> = (0..levels.len()).map(|i| ranking.prefers(i, levels.len(), cfg.min_margin)).collect();
         assert_eq!(above_still, [true, true, true, false], "margin {}", cfg.min_margin);
         assert!(!ranking.prefers(levels.len(), 0, cfg.min_margin));
+    }
+
+    /// The disturbances without jitter: at level 0 each is BC's mean action exactly; above it
+    /// each changes the actions, the same seed the same episode.
+    #[test]
+    fn ranked_disturbances_are_the_policy_at_zero_and_move_it_above() {
+        use crate::nn::{ActorCritic, PolicyConfig};
+        let mut env = Env::new(crate::env::EnvId::Hopper).unwrap();
+        let policy = crate::nn::seeded(4, || ActorCritic::new(PolicyConfig::ppo(11, 3)));
+        let meta = TrajMeta { source: "bc".into(), ..Default::default() };
+        let clean = epsilon_greedy(&mut env, &policy, &[0.0], 1, 9, &meta);
+        for kind in [Disturbance::Ou, Disturbance::Held, Disturbance::Weights] {
+            let set = disturb(&mut env, &policy, &[0.0, 0.5], 1, 9, &meta, kind);
+            assert_eq!(set.len(), 2);
+            assert_eq!(set[0].actions, clean[0].actions, "{kind:?} at level 0 is the policy");
+            assert_ne!(set[1].actions[..30], set[0].actions[..30], "{kind:?} at 0.5 moves it");
+            assert_eq!(set[1].meta.noise, 0.5);
+            assert_eq!(disturb(&mut env, &policy, &[0.0, 0.5], 1, 9, &meta, kind)[1].actions, set[1].actions, "seeded");
+        }
     }
 
     #[test]

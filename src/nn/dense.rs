@@ -127,6 +127,20 @@ impl Dense {
         }
     }
 
+    /// Adds Gaussian noise to every weight (not the biases), each layer's at `scale` times the
+    /// root mean square of its own weights, so one scale disturbs every layer alike
+    /// (parameter-space noise); the transposed weights follow.
+    pub fn perturb_weights(&mut self, scale: f64, rng: &mut impl rand::Rng) {
+        for l in self.layers.clone() {
+            let w = &mut self.params[l.w..l.b()];
+            let rms = (w.iter().map(|&x| (x as f64).powi(2)).sum::<f64>() / w.len().max(1) as f64).sqrt();
+            for x in w.iter_mut() {
+                *x += (scale * rms * rng.sample::<f64, _>(rand_distr::StandardNormal)) as f32;
+            }
+        }
+        self.refresh();
+    }
+
     /// Rewrites the transposed weights from the parameters: call after changing them.
     pub fn refresh(&mut self) {
         for l in &self.layers {

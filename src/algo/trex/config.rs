@@ -13,6 +13,15 @@ pub struct TrexConfig {
     pub pairs_per_model: usize,
     /// Window length in steps (shortened to the shorter trajectory where needed).
     pub window: usize,
+    /// With a value, each pair's window length is drawn uniformly from `window` to this
+    /// (SSRR's snippets: 50-500 steps); absent (the key's default), every window is `window`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window_max: Option<usize>,
+    /// Windows aligned in time as T-REX's code drew them: the preferred trajectory's window
+    /// starts no earlier than the other's, so a pair never prefers an early stretch to a late
+    /// one. Absent from the key when false (independent starts, D-REX's).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub aligned: bool,
     /// Smallest score difference for a pair.
     pub min_margin: f64,
     /// Pair only trajectories of the same group (multi-BC ranks within one clone).
@@ -104,6 +113,8 @@ impl Default for TrexConfig {
             models: 3,
             pairs_per_model: 5000,
             window: 50,
+            window_max: None,
+            aligned: false,
             min_margin: 0.3,
             same_group: false,
             lr: 1e-4,

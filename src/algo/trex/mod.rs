@@ -106,10 +106,21 @@ pub fn sample_pairs(trajs: &[Trajectory], ranking: &Ranking, cfg: &TrexConfig, n
     Ok((0..n)
         .map(|_| {
             let &(better, worse) = candidates.choose(rng).expect("non-empty");
-            let len = cfg.window.min(trajs[better].len()).min(trajs[worse].len());
+            // The options draw only when set, so the default's stream is D-REX's as before.
+            let want = match cfg.window_max {
+                Some(most) if most > cfg.window => rng.random_range(cfg.window..=most),
+                _ => cfg.window,
+            };
+            let len = want.min(trajs[better].len()).min(trajs[worse].len());
             let start = |t: &Trajectory, rng: &mut ChaCha8Rng| rng.random_range(0..=t.len() - len);
-            let wb = (better, start(&trajs[better], rng));
-            let ww = (worse, start(&trajs[worse], rng));
+            let (wb, ww) = if cfg.aligned {
+                let w = start(&trajs[worse], rng);
+                let last = trajs[better].len() - len;
+                ((better, rng.random_range(w.min(last)..=last)), (worse, w))
+            } else {
+                let wb = (better, start(&trajs[better], rng));
+                (wb, (worse, start(&trajs[worse], rng)))
+            };
             if rng.random_bool(0.5) { Pair { a: wb, b: ww, len, label: 0 } } else { Pair { a: ww, b: wb, len, label: 1 } }
         })
         .collect())
@@ -589,6 +600,29 @@ mod tests {
         let (again, ar) = torch_run();
         assert_eq!(weights(&again), weights(&torch));
         assert_eq!(ar, tr);
+    }
+
+    #[test]
+    fn aligned_and_longer_windows_follow_their_options() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let trajs = toy(10, &mut rng);
+        let ranking = Ranking::by_score((0..10).map(|i| i as f64).collect());
+        let base = TrexConfig { min_margin: 0.5, window: 10, ..Default::default() };
+        // Left unset, the options draw nothing: the same pairs as before they existed.
+        let spelled = TrexConfig { window_max: Some(10), aligned: false, ..base.clone() };
+        let draw = |cfg: &TrexConfig| sample_pairs(&trajs, &ranking, cfg, 200, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        assert_eq!(draw(&base), draw(&spelled));
+        let key = serde_json::to_string(&base).unwrap();
+        assert!(!key.contains("aligned") && !key.contains("window_max"), "{key}");
+        let aligned = draw(&TrexConfig { aligned: true, ..base.clone() });
+        for p in &aligned {
+            let (better, worse) = if p.label == 0 { (p.a, p.b) } else { (p.b, p.a) };
+            assert!(better.1 >= worse.1, "the preferred window starts no earlier: {p:?}");
+            assert_eq!(p.len, 10);
+        }
+        let longer = draw(&TrexConfig { window_max: Some(35), ..base });
+        assert!(longer.iter().all(|p| (10..=35).contains(&p.len)));
+        assert!(longer.iter().any(|p| p.len > 25) && longer.iter().any(|p| p.len < 15), "lengths spread over the range");
     }
 
     #[test]

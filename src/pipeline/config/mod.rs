@@ -178,6 +178,9 @@ pub struct NoiseConfig {
     /// The D-REX code ranks no-op episodes lowest on Atari (`add_noop`); 0 (the default) adds
     /// none, as its MuJoCo code.
     pub still: usize,
+    /// How the ranked rollouts are disturbed, each level its scale: `epsilon` (D-REX's; `toward`
+    /// applies), or without its jitter `ou`, `held` or `weights` ([`crate::algo::noise::Disturbance`]).
+    pub disturbance: crate::algo::noise::Disturbance,
 }
 
 impl Default for NoiseConfig {
@@ -189,6 +192,7 @@ impl Default for NoiseConfig {
             horizon: Horizon::Task,
             toward: NoiseToward::Random,
             still: 0,
+            disturbance: Default::default(),
         }
     }
 }

@@ -287,6 +287,7 @@ fn expand_methods(p: &Pipeline) -> crate::Result<Graph> {
             horizon: s.noise.horizon.on(env),
             toward: s.noise.toward,
             still: s.noise.still,
+            disturbance: s.noise.disturbance,
         }),
         seed0,
         Inputs::NoiseRollouts(NoiseInputs { policy: source.clone() }),

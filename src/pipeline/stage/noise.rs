@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 use super::{DegradationLevel, RolloutSummary, StageCtx, degradation, load_policy_for};
-use crate::algo::noise::{self, NoiseToward};
+use crate::algo::noise::{self, Disturbance, NoiseToward};
 use crate::data::TrajMeta;
 use crate::env::{Env, EnvId, Horizon};
 use crate::error::Result;
@@ -28,6 +28,9 @@ pub struct NoiseParams {
     /// MuJoCo code's).
     #[serde(default, skip_serializing_if = "super::is_zero")]
     pub still: usize,
+    /// How the rollouts are disturbed (absent from the key when `epsilon`, D-REX's).
+    #[serde(default, skip_serializing_if = "Disturbance::is_epsilon")]
+    pub disturbance: Disturbance,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -50,7 +53,10 @@ pub fn run(p: &NoiseParams, inputs: &NoiseInputs<PathBuf>, ctx: &StageCtx) -> Re
         NoiseToward::Both => "epsilon-greedy rollouts toward random and zero actions",
     });
     let meta = TrajMeta { source: "bc".into(), ..Default::default() };
-    let mut trajs = noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward);
+    let mut trajs = match p.disturbance {
+        Disturbance::Epsilon => noise::degrade(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, p.toward),
+        other => noise::disturb(&mut env, &policy, &p.schedule, p.rollouts_per_level, ctx.seed, &meta, other),
+    };
     trajs.extend(noise::still(&mut env, p.still, ctx.seed, &meta));
     ctx.write_rollouts(p.env, &trajs, None)?;
     Ok(NoiseMetrics { degradation: degradation(&trajs), returns: RolloutSummary::of(&trajs) })
@@ -71,6 +77,7 @@ mod tests {
             horizon: Horizon::Task,
             toward: NoiseToward::Random,
             still: 0,
+            disturbance: Disturbance::Epsilon,
         };
         let key = serde_json::to_string(&p).unwrap();
         assert!(!key.contains("toward") && !key.contains("still"), "{key}");
