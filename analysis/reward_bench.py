@@ -5,7 +5,12 @@ and forward term), with a 95 % bootstrap interval over replicates.
 
 Reads the store's manifests only (JSON; no idrex code), numpy for the statistics:
 
-    python analysis/reward_bench.py STORE [OUT.csv]
+    python analysis/reward_bench.py STORE OUT.csv PIPELINE_FILE...
+
+The pipeline files are the committed ones whose rewards the store regenerated (as
+`outcomes.csv` names them): an outcome is paired with a reward when its file is one of them
+and its task, seed set, replicate and learner are the reward's (a file's other variants, or
+another file on the same seeds, are other rewards).
 
 A T-REX artifact's seed gives its seed set and replicate (the replicate stride of
 `pipeline::config::replicate_seed`); its loss, the learner. Each bank-score names its bank,
@@ -61,14 +66,15 @@ def bootstrap(x, y, resamples=2000, seed=0):
 
 
 def learner(trex):
+    """The learner as `outcomes.csv` writes it."""
     t = trex["params"]["trex"]
     parts = [t.get("loss", "ranking")]
-    if t.get("observation", "all") not in ("all",):
+    if t.get("observation", "all") != "all":
         parts.append("trex.observation=" + t["observation"])
-    return parts
+    return "; ".join(parts)
 
 
-def main(store, out=None):
+def main(store, out, files):
     by_key = {m["key"]: m for m in manifests(store)}
     outcomes = list(csv.DictReader(open(OUTCOMES)))
     rows = []
@@ -87,11 +93,7 @@ def main(store, out=None):
         matches = [
             o for o in outcomes
             if o["env"] == env and o["seed_set"].split("-")[0] == str(base) and int(o["replicate"]) == r
-            and o["learner"].split(";")[0].strip() == loss[0] and ("NOT REGENERABLE" not in o["notes"])
-            and (len(loss) == 1) == ("trex.observation" not in o["learner"])
-            # An older commit's file (`FILE@commit`) is another reward or another composition:
-            # each reward is paired with the outcome of the file as it stands.
-            and "@" not in o["pipeline_file"]
+            and o["learner"] == loss and o["pipeline_file"] in files
         ]
         s = m["metrics"]
         overpaid = sum(s["overpaid"])
@@ -113,7 +115,7 @@ def main(store, out=None):
             seen.add(k)
             unique.append(r)
     unique.sort(key=lambda r: (r["design"], r["env"], r["seed_set"], r["replicate"], r["learner"]))
-    if out:
+    if unique:
         with open(out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=list(unique[0].keys()) if unique else ["env"])
             w.writeheader()
@@ -135,4 +137,4 @@ def main(store, out=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else None)
+    main(sys.argv[1], sys.argv[2], sys.argv[3:])

@@ -16,6 +16,9 @@ use crate::pipeline::stage::{Metrics, Params, Typed};
 use crate::stats::{pearson, spearman};
 use crate::store::Manifest;
 
+/// Each scored reward's scores on its task's bank, by its T-REX artifact's key.
+type BankScores = BTreeMap<String, crate::algo::bank::BankScore>;
+
 /// One evaluation episode's return.
 struct EpisodeRow {
     env: String,
@@ -104,7 +107,7 @@ impl Gathered {
     fn add(
         &mut self,
         store: &Artifacts,
-        (ssrr, bank): (&BTreeMap<(String, String), f64>, &BTreeMap<String, crate::algo::bank::BankScore>),
+        (ssrr, bank): (&BTreeMap<(String, String), f64>, &BankScores),
         m: &Manifest,
         p: &EvalParams,
         x: &EvalMetrics,
