@@ -42,7 +42,8 @@ fn a_forward_velocity_reward_scores_high_on_the_bank_and_a_still_joint_reward_lo
     std::fs::write(&file, BANK).unwrap();
     let run = |store: &str, jobs: &str| {
         let s = dir.join(store);
-        let out = idrex(&["pipeline", "run", file.to_str().unwrap(), "--store", s.to_str().unwrap(), "--jobs", jobs, "--target", "bank/gaits"]);
+        let out =
+            idrex(&["pipeline", "run", file.to_str().unwrap(), "--store", s.to_str().unwrap(), "--jobs", jobs, "--target", "bank/gaits"]);
         assert!(out.status.success(), "{}", stderr(&out));
         assert!(stdout(&out).contains("3 stages, 3 computed"), "--target runs the bank alone: {}", stdout(&out));
         manifests(&s)

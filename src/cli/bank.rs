@@ -99,11 +99,8 @@ fn bank_for(
     let m = match (chosen, env) {
         (Some(prefix), _) => by_prefix(all, prefix)?,
         (None, Some(env)) => {
-            let of_env: Vec<&Manifest> = banks
-                .iter()
-                .copied()
-                .filter(|m| matches!(Typed::of(m).map(|t| t.params), Ok(Params::Bank(p)) if p.env == env))
-                .collect();
+            let of_env: Vec<&Manifest> =
+                banks.iter().copied().filter(|m| matches!(Typed::of(m).map(|t| t.params), Ok(Params::Bank(p)) if p.env == env)).collect();
             match of_env.as_slice() {
                 [one] => *one,
                 [] => bail!("the store holds no bank of {}; run a pipeline file with `bank: {{}}` on it first", env.name()),
@@ -126,7 +123,8 @@ fn table(rows: &[(String, String, BankScore)]) -> Table {
     let rows = rows
         .iter()
         .map(|(reward, bank, s)| {
-            let mut r = vec![Cell::text(reward), Cell::text(bank), x(s.pearson), x(s.spearman), x(s.forward_pearson), x(s.forward_spearman)];
+            let mut r =
+                vec![Cell::text(reward), Cell::text(bank), x(s.pearson), x(s.spearman), x(s.forward_pearson), x(s.forward_spearman)];
             r.extend([GaitClass::Backward, GaitClass::Still, GaitClass::Random].map(|c| Cell::int(s.overpaid_of(c))));
             r.push(x(s.misordered));
             let pay = |c: GaitClass| s.per_class.iter().find(|p| p.class == c).map_or(f64::NAN, |p| p.learned_per_step);

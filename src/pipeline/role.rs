@@ -73,7 +73,8 @@ impl Series {
 }
 
 impl Role {
-    const SINGLE: [Role; 8] = [Role::Policy, Role::Demos, Role::Reward, Role::Floor, Role::Judge, Role::Forward, Role::Backward, Role::Bank];
+    const SINGLE: [Role; 8] =
+        [Role::Policy, Role::Demos, Role::Reward, Role::Floor, Role::Judge, Role::Forward, Role::Backward, Role::Bank];
 
     /// The name keys and manifests record.
     pub fn name(self) -> String {

@@ -56,7 +56,10 @@ pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
         let id = (p.env.name().to_string(), p.table(), method_label(p.method, p.iteration));
         groups.entry(id).or_default().insert(k.clone(), s);
     }
-    groups.into_iter().map(|((env, pipeline, method), by_reward)| row(env, pipeline, method, by_reward.values().copied().collect())).collect()
+    groups
+        .into_iter()
+        .map(|((env, pipeline, method), by_reward)| row(env, pipeline, method, by_reward.values().copied().collect()))
+        .collect()
 }
 
 fn row(env: String, pipeline: String, method: String, s: Vec<&BankScore>) -> BankRow {

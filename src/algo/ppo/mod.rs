@@ -150,7 +150,10 @@ pub enum RewardSource {
     /// The task's reward with its forward term negated: the same costs and healthy reward,
     /// progress paid backwards (the reward bench's backward gaits).
     Backward,
-    Learned { model: RewardEnsemble, composition: Composition },
+    Learned {
+        model: RewardEnsemble,
+        composition: Composition,
+    },
 }
 
 /// Reported after every update.

@@ -1,8 +1,8 @@
 //! Pipeline files' schema, version 1: the structs a YAML file deserialises into, each field
 //! documented here once (`docs/pipelines.md` is checked against them). Reading and checking
 //! a file is [`crate::pipeline::load`].
-pub mod error;
 mod bank;
+pub mod error;
 mod idrex;
 pub mod schema;
 pub mod settings;

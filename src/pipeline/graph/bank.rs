@@ -35,7 +35,8 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
         let ppo = PpoConfig { total_steps: steps, horizon: Horizon::Task, ..PpoConfig::default() };
         Params::BankPolicy(BankPolicyParams { env: gait_env(env), ppo, objective, checkpoints, first: cfg.first })
     };
-    let forward = g.push("bank/forward", run(cfg.steps, Objective::Forward, cfg.checkpoints), cfg.seed, Inputs::BankPolicy(NoInputs::default()));
+    let forward =
+        g.push("bank/forward", run(cfg.steps, Objective::Forward, cfg.checkpoints), cfg.seed, Inputs::BankPolicy(NoInputs::default()));
     let backward = g.push(
         "bank/backward",
         run(cfg.backward_steps, Objective::Backward, cfg.backward_checkpoints),
