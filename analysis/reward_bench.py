@@ -14,7 +14,8 @@ another file on the same seeds, are other rewards).
 
 A T-REX artifact's seed gives its seed set and replicate (the replicate stride of
 `pipeline::config::replicate_seed`); its loss, the learner. Each bank-score names its bank,
-whose parameters say the design (1: evenly spaced checkpoints; 2: `first` and `mean`).
+whose parameters say the design (1: evenly spaced checkpoints; 2: `first` and `mean`). Where the
+store holds a probe of the reward (`bank.probe`), its true return minus BC's is scored too.
 """
 import csv
 import json
@@ -76,6 +77,8 @@ def learner(trex):
 
 def main(store, out, files):
     by_key = {m["key"]: m for m in manifests(store)}
+    # The probe of each reward (`bank.probe`): a short PPO run's true return, last quarter.
+    probes = {m["inputs"]["reward"]: m["metrics"]["true_return"] for m in by_key.values() if m["kind"] == "probe"}
     outcomes = list(csv.DictReader(open(OUTCOMES)))
     rows = []
     for m in by_key.values():
@@ -104,6 +107,7 @@ def main(store, out, files):
                 "env": env, "seed_set": o["seed_set"], "replicate": r, "learner": o["learner"], "design": design,
                 "reward": trex["key"][:12], "spearman": s["spearman"], "forward_spearman": s["forward_spearman"],
                 "overpaid": overpaid, "misordered": s["misordered"], "flags": int(overpaid > 0 or s["forward_spearman"] < 0.5),
+                "probe_minus_bc": probes.get(trex["key"], float("nan")) - bc,
                 "drex_minus_bc": dr - bc, "forward_minus_bc": df - bf, "pipeline_file": o["pipeline_file"],
                 "notes": o["notes"][:120],
             })
@@ -126,7 +130,7 @@ def main(store, out, files):
             sub = [r for r in unique if r["design"] == design and r["env"] == env and np.isfinite(r["drex_minus_bc"])]
             if len(sub) < 3:
                 continue
-            for score in ("spearman", "forward_spearman", "misordered"):
+            for score in ("spearman", "forward_spearman", "misordered", "probe_minus_bc"):
                 for outcome in ("drex_minus_bc", "forward_minus_bc"):
                     pairs = [(r[score], r[outcome]) for r in sub if np.isfinite(r[outcome]) and np.isfinite(r[score])]
                     if len(pairs) < 3:

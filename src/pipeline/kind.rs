@@ -35,6 +35,7 @@ kinds! {
     BankPolicy = "bank-policy",
     Bank = "bank",
     BankScore = "bank-score",
+    Probe = "probe",
 }
 
 impl StageKind {

@@ -226,7 +226,8 @@ fn plot_node(rec: &Recording, n: &super::graph::Node, m: &Metrics, gathered: &mu
         | Metrics::Bc(_)
         | Metrics::BankPolicy(_)
         | Metrics::Bank(_)
-        | Metrics::BankScore(_) => {}
+        | Metrics::BankScore(_)
+        | Metrics::Probe(_) => {}
     }
 }
 

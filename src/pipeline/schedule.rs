@@ -34,6 +34,7 @@ fn work(params: &Params) -> f64 {
             per_checkpoint * 12 + p.still + p.random
         }
         Params::BankScore(_) => 1,
+        Params::Probe(p) => p.run.ppo.total_steps,
     };
     n.max(1) as f64
 }
@@ -42,7 +43,7 @@ fn work(params: &Params) -> f64 {
 /// settings, `--jobs 2`), for kinds the store has no artifact of.
 fn reference_rate(kind: StageKind) -> f64 {
     match kind {
-        StageKind::Ppo | StageKind::Demonstrator | StageKind::BankPolicy => 65.0 / 1e6,
+        StageKind::Ppo | StageKind::Demonstrator | StageKind::BankPolicy | StageKind::Probe => 65.0 / 1e6,
         StageKind::Bc => 80.0 / 50_000.0,
         StageKind::MultiBcRollouts => 220.0 / 150_100.0,
         StageKind::Trex => 160.0 / 9_000.0,

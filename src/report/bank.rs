@@ -20,6 +20,18 @@ pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
         .collect()
 }
 
+/// Each probed reward (its T-REX artifact's key) and its probe's score
+/// ([`crate::pipeline::stage::probe`]).
+pub fn probes(arts: &Artifacts) -> BTreeMap<String, f64> {
+    arts.iter()
+        .filter(|m| m.kind == StageKind::Probe.name())
+        .filter_map(|m| match arts.typed(m)? {
+            Typed { metrics: Metrics::Probe(x), .. } => Some((input_key(m, Role::Reward)?.clone(), x.true_return)),
+            _ => None,
+        })
+        .collect()
+}
+
 /// `bank.csv`: one row per (env, table, method) whose reward was scored; several rewards (an
 /// iterated method's) are averaged.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,6 +51,8 @@ pub struct BankRow {
     pub misordered: f64,
     /// Learned reward per step on each class of [`GaitClass::ALL`] (NaN where absent).
     pub pay: [f64; 4],
+    /// The probes' true return per episode (`bank.probe`; NaN where none ran).
+    pub probe: f64,
 }
 
 impl BankRow {
@@ -49,6 +63,7 @@ impl BankRow {
 
 pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     let scored = scores(arts);
+    let probed = probes(arts);
     let mut groups: BTreeMap<(String, String, String), BTreeMap<String, &BankScore>> = BTreeMap::new();
     for (m, p, _) in arts.evaluations() {
         let Some(k) = input_key(m, Role::Reward) else { continue };
@@ -58,7 +73,11 @@ pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     }
     groups
         .into_iter()
-        .map(|((env, pipeline, method), by_reward)| row(env, pipeline, method, by_reward.values().copied().collect()))
+        .map(|((env, pipeline, method), by_reward)| {
+            let probes: Vec<f64> = by_reward.keys().filter_map(|k| probed.get(k).copied()).collect();
+            let probe = if probes.is_empty() { f64::NAN } else { probes.iter().sum::<f64>() / probes.len() as f64 };
+            BankRow { probe, ..row(env, pipeline, method, by_reward.values().copied().collect()) }
+        })
         .collect()
 }
 
@@ -82,6 +101,7 @@ fn row(env: String, pipeline: String, method: String, s: Vec<&BankScore>) -> Ban
         overpaid: [overpaid(GaitClass::Backward), overpaid(GaitClass::Still), overpaid(GaitClass::Random)],
         misordered: mean(&|x| x.misordered),
         pay: GaitClass::ALL.map(pay),
+        probe: f64::NAN,
     }
 }
 
@@ -105,6 +125,7 @@ impl Row for BankRow {
             "pay_backward",
             "pay_still",
             "pay_random",
+            "probe_return",
         ]
     }
     fn cells(&self) -> Vec<Cell> {
@@ -123,6 +144,7 @@ impl Row for BankRow {
         out.extend(self.overpaid.iter().map(|&n| Cell::int(n)));
         out.push(x(self.misordered));
         out.extend(self.pay.iter().map(|&v| x(v)));
+        out.push(Cell::opt(Some(self.probe).filter(|v| v.is_finite()), 1));
         out
     }
 }
@@ -140,7 +162,8 @@ pub fn markdown(rows: &[BankRow]) -> String {
         "Pearson and Spearman: learned against true return over the bank, and within the forward gaits (does it order ",
         "speed?). Overpaid: backward, still and random trajectories the reward pays more than a forward gait the true ",
         "return ranks above them; misordered: the share of such pairs it orders the wrong way. Pay: the learned reward ",
-        "per step on each class.\n\n",
+        "per step on each class. Probe (with `bank.probe`): the true return per episode of a short PPO run on the ",
+        "reward as the method's runs compose it, over its last quarter: the gait PPO finds on the learned reward.\n\n",
     ));
     let mut table = Table::of(rows);
     table.columns = [
@@ -161,6 +184,7 @@ pub fn markdown(rows: &[BankRow]) -> String {
         "pay backward",
         "pay still",
         "pay random",
+        "probe",
     ]
     .map(String::from)
     .to_vec();

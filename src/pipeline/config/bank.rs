@@ -36,6 +36,11 @@ pub struct BankConfig {
     pub random: usize,
     /// The bank's seed (its PPO runs and episodes), apart from every study's.
     pub seed: u64,
+    /// PPO steps of a probe beside every reward PPO trains on: one short run on the reward
+    /// as the method's first run composes it, scored by the true return of its last quarter
+    /// (`drex/trex/probe`). Absent, none; not part of the bank's keys.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub probe: Option<usize>,
 }
 
 impl Default for BankConfig {
@@ -54,6 +59,7 @@ impl Default for BankConfig {
             still: 3,
             random: 3,
             seed: 7_000_000,
+            probe: None,
         }
     }
 }

@@ -1,11 +1,13 @@
 //! The reward bench's nodes ([`crate::pipeline::stage::bank`]): two PPO runs and the bank,
-//! named `bank/...` once per environment whatever the replicates, and one `bank-score` beside
-//! every T-REX node of the graph (`drex/trex` -> `drex/trex/bank-score`).
+//! named `bank/...` once per environment whatever the replicates, one `bank-score` beside
+//! every T-REX node of the graph (`drex/trex` -> `drex/trex/bank-score`) and, with
+//! `bank.probe`, a short PPO run beside every reward PPO trains on (`drex/trex/probe`).
 use super::{Graph, Inputs, NoInputs, Params, StageKind};
 use crate::algo::ppo::PpoConfig;
 use crate::env::{EnvId, Horizon};
 use crate::pipeline::config::BankConfig;
 use crate::pipeline::stage::bank::{BankParams, BankPolicyParams, Objective, ScoreParams};
+use crate::pipeline::stage::probe::ProbeParams;
 use crate::pipeline::stage::{BankPolicyInputs, ScoreInputs};
 
 const PREFIX: &str = "bank/";
@@ -57,7 +59,23 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
     for reward in rewards {
         let inputs = Inputs::BankScore(ScoreInputs { reward: reward.clone(), bank: bank.clone() });
         g.push(format!("{reward}/bank-score"), Params::BankScore(ScoreParams { env }), cfg.seed, inputs);
+        if let Some(steps) = cfg.probe {
+            push_probe(g, &reward, steps);
+        }
     }
+}
+
+/// The probe of `reward`: its first RL run's stage, shortened to `steps`, on that run's seed
+/// and inputs. None where no PPO trains on the reward (a judge).
+fn push_probe(g: &mut Graph, reward: &str, steps: usize) {
+    let first = g.nodes.iter().find_map(|n| match (&n.params, &n.inputs) {
+        (Params::Ppo(p), Inputs::Ppo(i)) if i.reward == reward => Some((p.clone(), i.clone(), n.seed)),
+        _ => None,
+    });
+    let Some((mut run, inputs, seed)) = first else { return };
+    run.ppo.total_steps = steps;
+    run.ppo.checkpoint_every = 0;
+    g.push(format!("{reward}/probe"), Params::Probe(ProbeParams { run }), seed, Inputs::Probe(inputs));
 }
 
 #[cfg(test)]
@@ -101,6 +119,25 @@ mod tests {
         let ant = graph(&BASE.replace("Hopper-v5", "Ant-v5"));
         assert!(matches!(&ant.get("bank/forward").unwrap().params, Params::BankPolicy(p) if p.env == EnvId::AntNoCfrc));
         assert!(matches!(&ant.get("bank/gaits").unwrap().params, Params::Bank(p) if p.env == EnvId::Ant));
+    }
+
+    /// A probe is the reward's first RL run, shortened, with that run's seed and inputs; the
+    /// bank's keys and every other node's ignore it, and a judge (no PPO) has none.
+    #[test]
+    fn a_probe_is_the_first_run_shortened() {
+        let text = format!("{}methods: [bc, drex, idrex-multi-bc]\n", BASE.replace("bank: {}", "bank: {probe: 20480}"));
+        let g = graph(&text);
+        let probe = g.get("drex/trex/probe").unwrap();
+        let run = g.get("drex/ppo/0").unwrap();
+        let (Params::Probe(p), Params::Ppo(r)) = (&probe.params, &run.params) else { panic!("a probe is a PPO run") };
+        assert_eq!((p.run.ppo.total_steps, p.run.ppo.checkpoint_every, probe.seed), (20480, 0, run.seed));
+        let same = PpoConfig { total_steps: r.ppo.total_steps, checkpoint_every: r.ppo.checkpoint_every, ..p.run.ppo.clone() };
+        assert_eq!((same, p.run.reward, p.run.env), (r.ppo.clone(), r.reward, r.env), "otherwise the run's settings");
+        assert!(matches!((&probe.inputs, &run.inputs), (Inputs::Probe(a), Inputs::Ppo(b)) if a == b), "the run's reward and floor");
+        assert!(g.get("idrex-multi-bc/k1/trex/probe").is_some() && g.get("idrex-multi-bc/k1/judge/probe").is_none());
+        let plain = graph(&text.replace("bank: {probe: 20480}", "bank: {}"));
+        assert!(plain.nodes.iter().all(|n| n.kind() != StageKind::Probe));
+        assert!(plain.keys().iter().all(|(n, k)| g.keys()[n] == *k), "nothing else changes");
     }
 
     /// `--target` keeps the named nodes and what they read, nothing else.

@@ -27,6 +27,7 @@
 //! | bank-policy | 1 | - | policy/, checkpoints/ | bank.rs |
 //! | bank | 1 | forward, backward | rollouts.mcap, bank.json | bank.rs |
 //! | bank-score | 1 | reward, bank | - | bank.rs |
+//! | probe | 1 | reward, floor? | policy/, curve.csv | probe.rs |
 pub mod bank;
 pub mod bc;
 pub mod demos;
@@ -34,6 +35,7 @@ pub mod eval;
 pub mod idrex;
 pub mod noise;
 pub mod ppo;
+pub mod probe;
 pub mod trex;
 
 use std::collections::BTreeMap;
@@ -168,6 +170,7 @@ stage_kinds! {
     BankPolicy: bank::BankPolicyParams => bank::BankPolicyMetrics, NoInputs, bank::policy;
     Bank: bank::BankParams => bank::BankMetrics, BankPolicyInputs, bank::run;
     BankScore: bank::ScoreParams => crate::algo::bank::BankScore, ScoreInputs, bank::score;
+    Probe: probe::ProbeParams => probe::ProbeMetrics, PpoInputs, probe::run;
 }
 
 impl<T> Inputs<T> {
