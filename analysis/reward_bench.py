@@ -78,7 +78,8 @@ def learner(trex):
 def main(store, out, files):
     by_key = {m["key"]: m for m in manifests(store)}
     # The probe of each reward (`bank.probe`): a short PPO run's true return, last quarter.
-    probes = {m["inputs"]["reward"]: m["metrics"]["true_return"] for m in by_key.values() if m["kind"] == "probe"}
+    # With the final policy's forward term per episode, for a task that ends (moving or living).
+    probes = {m["inputs"]["reward"]: m["metrics"] for m in by_key.values() if m["kind"] == "probe"}
     outcomes = list(csv.DictReader(open(OUTCOMES)))
     rows = []
     for m in by_key.values():
@@ -107,7 +108,8 @@ def main(store, out, files):
                 "env": env, "seed_set": o["seed_set"], "replicate": r, "learner": o["learner"], "design": design,
                 "reward": trex["key"][:12], "spearman": s["spearman"], "forward_spearman": s["forward_spearman"],
                 "overpaid": overpaid, "misordered": s["misordered"], "flags": int(overpaid > 0 or s["forward_spearman"] < 0.5),
-                "probe_minus_bc": probes.get(trex["key"], float("nan")) - bc,
+                "probe_minus_bc": probes.get(trex["key"], {}).get("true_return", float("nan")) - bc, "minus_bc": -bc,
+                "probe_forward_minus_bc": probes.get(trex["key"], {}).get("final_forward", float("nan")) - bf,
                 "drex_minus_bc": dr - bc, "forward_minus_bc": df - bf, "pipeline_file": o["pipeline_file"],
                 "notes": o["notes"][:120],
             })
@@ -130,7 +132,8 @@ def main(store, out, files):
             sub = [r for r in unique if r["design"] == design and r["env"] == env and np.isfinite(r["drex_minus_bc"])]
             if len(sub) < 3:
                 continue
-            for score in ("spearman", "forward_spearman", "misordered", "probe_minus_bc"):
+            # minus_bc, BC's return alone: the control for probe_minus_bc (both share "minus BC").
+            for score in ("spearman", "forward_spearman", "misordered", "probe_minus_bc", "probe_forward_minus_bc", "minus_bc"):
                 for outcome in ("drex_minus_bc", "forward_minus_bc"):
                     pairs = [(r[score], r[outcome]) for r in sub if np.isfinite(r[outcome]) and np.isfinite(r[score])]
                     if len(pairs) < 3:

@@ -1,7 +1,8 @@
 //! The reward bench on real MuJoCo models: a HalfCheetah bank built twice (`--jobs 1` and
 //! `--jobs 2`, the same bytes), a hand-written reward that pays forward velocity scoring high
 //! on it and one that pays still joints scoring low; and the smoke pipeline with a bank, whose
-//! report and `idrex bank score` carry every learned reward's scores.
+//! report and `idrex bank score` carry every learned reward's scores, and a probe runs beside
+//! every reward PPO trains on.
 use std::path::{Path, PathBuf};
 
 use idrex::algo::bank::{BankScore, GaitClass, score};
@@ -79,7 +80,7 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     let dir = TempDir::new("bank-report");
     let smoke = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
     let tiny = "bank:\n  steps: 6144\n  backward_steps: 2048\n  checkpoints: 2\n  backward_checkpoints: 1\n  episodes: 1\n  \
-                epsilon: [0.5]\n  smooth: [0.5]\n  still: 1\n  random: 1\n";
+                epsilon: [0.5]\n  smooth: [0.5]\n  still: 1\n  random: 1\n  probe: 2048\n";
     let file = dir.join("smoke.yaml");
     std::fs::write(&file, format!("{smoke}{tiny}")).unwrap();
     let store = dir.join("store");
@@ -89,6 +90,9 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     assert!(out.status.success(), "{}", stderr(&out));
     let scores: Vec<serde_json::Value> = manifests(&store).into_iter().filter(|(_, m)| m["kind"] == "bank-score").map(|(_, m)| m).collect();
     assert_eq!(scores.len(), 4, "one per T-REX stage: D-REX's and each iD-REX variant's");
+    let probes: Vec<serde_json::Value> = manifests(&store).into_iter().filter(|(_, m)| m["kind"] == "probe").map(|(_, m)| m).collect();
+    assert_eq!(probes.len(), 4, "a probe beside every reward PPO trains on");
+    assert!(probes.iter().all(|m| m["metrics"]["true_return"].as_f64().is_some_and(f64::is_finite)), "{probes:?}");
 
     let report = dir.join("report");
     let r = report.to_str().unwrap();
@@ -102,6 +106,8 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     assert!(md.contains("## The reward bench") && md.contains("bank Spearman") && md.contains("gain over BC, by term"), "{md}");
     let bank_csv = std::fs::read_to_string(report.join("bank.csv")).unwrap();
     assert_eq!(bank_csv.lines().count(), 5, "a header and one row per learned-reward method: {bank_csv}");
+    let probe_at = bank_csv.lines().next().unwrap().split(',').position(|h| h == "probe_return").unwrap();
+    assert!(bank_csv.lines().skip(1).all(|l| l.split(',').nth(probe_at).unwrap().parse::<f64>().is_ok()), "{bank_csv}");
     let accuracy = std::fs::read_to_string(report.join("reward_accuracy.csv")).unwrap();
     let header: Vec<&str> = accuracy.lines().next().unwrap().split(',').collect();
     let at = |c: &str| header.iter().position(|h| *h == c).unwrap();

@@ -22,11 +22,11 @@ pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
 
 /// Each probed reward (its T-REX artifact's key) and its probe's score
 /// ([`crate::pipeline::stage::probe`]).
-pub fn probes(arts: &Artifacts) -> BTreeMap<String, f64> {
+pub fn probes(arts: &Artifacts) -> BTreeMap<String, (f64, f64)> {
     arts.iter()
         .filter(|m| m.kind == StageKind::Probe.name())
         .filter_map(|m| match arts.typed(m)? {
-            Typed { metrics: Metrics::Probe(x), .. } => Some((input_key(m, Role::Reward)?.clone(), x.true_return)),
+            Typed { metrics: Metrics::Probe(x), .. } => Some((input_key(m, Role::Reward)?.clone(), (x.true_return, x.final_forward))),
             _ => None,
         })
         .collect()
@@ -51,8 +51,10 @@ pub struct BankRow {
     pub misordered: f64,
     /// Learned reward per step on each class of [`GaitClass::ALL`] (NaN where absent).
     pub pay: [f64; 4],
-    /// The probes' true return per episode (`bank.probe`; NaN where none ran).
+    /// The probes' true return per episode (`bank.probe`; NaN where none ran), and their final
+    /// policies' forward term per episode.
     pub probe: f64,
+    pub probe_forward: f64,
 }
 
 impl BankRow {
@@ -74,9 +76,11 @@ pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     groups
         .into_iter()
         .map(|((env, pipeline, method), by_reward)| {
-            let probes: Vec<f64> = by_reward.keys().filter_map(|k| probed.get(k).copied()).collect();
-            let probe = if probes.is_empty() { f64::NAN } else { probes.iter().sum::<f64>() / probes.len() as f64 };
-            BankRow { probe, ..row(env, pipeline, method, by_reward.values().copied().collect()) }
+            let probes: Vec<(f64, f64)> = by_reward.keys().filter_map(|k| probed.get(k).copied()).collect();
+            let mean = |f: fn(&(f64, f64)) -> f64| {
+                if probes.is_empty() { f64::NAN } else { probes.iter().map(f).sum::<f64>() / probes.len() as f64 }
+            };
+            BankRow { probe: mean(|p| p.0), probe_forward: mean(|p| p.1), ..row(env, pipeline, method, by_reward.values().copied().collect()) }
         })
         .collect()
 }
@@ -102,6 +106,7 @@ fn row(env: String, pipeline: String, method: String, s: Vec<&BankScore>) -> Ban
         misordered: mean(&|x| x.misordered),
         pay: GaitClass::ALL.map(pay),
         probe: f64::NAN,
+        probe_forward: f64::NAN,
     }
 }
 
@@ -126,6 +131,7 @@ impl Row for BankRow {
             "pay_still",
             "pay_random",
             "probe_return",
+            "probe_forward",
         ]
     }
     fn cells(&self) -> Vec<Cell> {
@@ -144,7 +150,7 @@ impl Row for BankRow {
         out.extend(self.overpaid.iter().map(|&n| Cell::int(n)));
         out.push(x(self.misordered));
         out.extend(self.pay.iter().map(|&v| x(v)));
-        out.push(Cell::opt(Some(self.probe).filter(|v| v.is_finite()), 1));
+        out.extend([self.probe, self.probe_forward].map(|v| Cell::opt(Some(v).filter(|v| v.is_finite()), 1)));
         out
     }
 }
@@ -163,7 +169,8 @@ pub fn markdown(rows: &[BankRow]) -> String {
         "speed?). Overpaid: backward, still and random trajectories the reward pays more than a forward gait the true ",
         "return ranks above them; misordered: the share of such pairs it orders the wrong way. Pay: the learned reward ",
         "per step on each class. Probe (with `bank.probe`): the true return per episode of a short PPO run on the ",
-        "reward as the method's runs compose it, over its last quarter: the gait PPO finds on the learned reward.\n\n",
+        "reward as the method's runs compose it, over its last quarter: the gait PPO finds on the learned reward; probe ",
+        "forward: its final policy's forward term per episode (moving, not only living).\n\n",
     ));
     let mut table = Table::of(rows);
     table.columns = [
@@ -185,6 +192,7 @@ pub fn markdown(rows: &[BankRow]) -> String {
         "pay still",
         "pay random",
         "probe",
+        "probe forward",
     ]
     .map(String::from)
     .to_vec();

@@ -65,6 +65,9 @@ pub fn expand(g: &mut Graph, env: EnvId, cfg: &BankConfig) {
     }
 }
 
+/// Episodes of a probe's final policy.
+const PROBE_EPISODES: usize = 5;
+
 /// The probe of `reward`: its first RL run's stage, shortened to `steps`, on that run's seed
 /// and inputs. None where no PPO trains on the reward (a judge).
 fn push_probe(g: &mut Graph, reward: &str, steps: usize) {
@@ -75,7 +78,7 @@ fn push_probe(g: &mut Graph, reward: &str, steps: usize) {
     let Some((mut run, inputs, seed)) = first else { return };
     run.ppo.total_steps = steps;
     run.ppo.checkpoint_every = 0;
-    g.push(format!("{reward}/probe"), Params::Probe(ProbeParams { run }), seed, Inputs::Probe(inputs));
+    g.push(format!("{reward}/probe"), Params::Probe(ProbeParams { run, episodes: PROBE_EPISODES }), seed, Inputs::Probe(inputs));
 }
 
 #[cfg(test)]

@@ -1,15 +1,22 @@
 //! `probe`: the reward bench's look at what PPO makes of a learned reward, before the RL runs
 //! pay for it. One short PPO run (`bank.probe` steps) on the reward exactly as the method's
 //! runs compose it; its score is the true return of the training episodes that ended in the
-//! last quarter of its steps. The bank asks whether a reward orders gaits PPO found on the
+//! last quarter of its steps. Its final policy then acts for `episodes` episodes, as the
+//! evaluation stage's do, so that on a task that ends the probe says whether the gait moves
+//! or only lives (the forward term; the training curve has no terms). The bank asks whether a reward orders gaits PPO found on the
 //! *true* reward; the probe asks what gait PPO finds on the *learned* one
 //! (`analysis/results/reward-bench/README.md`: on HalfCheetah the first fifth of the locked
 //! sets' own runs predicted their end where the bank did not).
 use std::path::PathBuf;
 
-use super::StageCtx;
+use super::{POLICY, StageCtx};
 use super::ppo::{self, CurvePoint, PpoInputs, PpoMetrics, PpoParams};
+use crate::data::TrajMeta;
+use crate::env::Env;
 use crate::error::{Error, Result};
+use crate::nn::ActorCritic;
+use crate::rollout::{self, PolicyActor};
+use crate::seed::Purpose;
 
 /// The share of the probe's steps, at its end, whose finished episodes make its score.
 pub const TAIL: f64 = 0.25;
@@ -19,6 +26,8 @@ pub const TAIL: f64 = 0.25;
 pub struct ProbeParams {
     /// The method's first RL run's parameters with the probe's steps and no checkpoints.
     pub run: PpoParams,
+    /// Episodes of the final policy acting (its sampled actions, on the evaluation's seeds).
+    pub episodes: usize,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -28,6 +37,10 @@ pub struct ProbeMetrics {
     pub true_return: f64,
     /// The same episodes' learned return.
     pub learned_return: Option<f64>,
+    /// The final policy's `episodes` episodes: the mean true return, forward term and length.
+    pub final_return: f64,
+    pub final_forward: f64,
+    pub final_length: f64,
     pub run: PpoMetrics,
 }
 
@@ -48,7 +61,19 @@ pub fn run(p: &ProbeParams, inputs: &PpoInputs<PathBuf>, ctx: &StageCtx) -> Resu
         ))
     })?;
     let learned_return = tail_mean(&run.curve, total, TAIL, |c| c.learned_return);
-    Ok(ProbeMetrics { true_return, learned_return, run })
+    let policy = ActorCritic::load(&ctx.out.join(POLICY))?;
+    let mut env = Env::new(p.run.env)?;
+    let meta = TrajMeta { source: "probe".into(), ..Default::default() };
+    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes.max(1), ctx.seed, Purpose::EvalEpisode, &meta);
+    let mean = |f: &dyn Fn(&crate::data::Trajectory) -> f64| trajs.iter().map(f).sum::<f64>() / trajs.len() as f64;
+    Ok(ProbeMetrics {
+        true_return,
+        learned_return,
+        final_return: mean(&|t| t.ret()),
+        final_forward: mean(&|t| t.terms.iter().map(|x| x.reward_forward).sum()),
+        final_length: mean(&|t| t.len() as f64),
+        run,
+    })
 }
 
 #[cfg(test)]
