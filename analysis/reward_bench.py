@@ -79,7 +79,9 @@ def main(store, out, files):
     by_key = {m["key"]: m for m in manifests(store)}
     # The probe of each reward (`bank.probe`): a short PPO run's true return, last quarter.
     # With the final policy's forward term per episode, for a task that ends (moving or living).
-    probes = {m["inputs"]["reward"]: m["metrics"] for m in by_key.values() if m["kind"] == "probe"}
+    # A probe made before it rolled its final policy out has no final_forward: the newer wins.
+    probed = sorted((m for m in by_key.values() if m["kind"] == "probe"), key=lambda m: "final_forward" in m["metrics"])
+    probes = {m["inputs"]["reward"]: m["metrics"] for m in probed}
     outcomes = list(csv.DictReader(open(OUTCOMES)))
     rows = []
     for m in by_key.values():

@@ -9,14 +9,16 @@ use crate::algo::bank::{BankScore, GaitClass};
 use crate::log::table::{Cell, Table};
 use crate::nn::RewardEnsemble;
 use crate::pipeline::stage::bank::score_reward;
-use crate::pipeline::stage::{Params, REWARD, StageKind, Typed};
+use crate::pipeline::role::{Role, recorded_input};
+use crate::pipeline::stage::{Metrics, Params, REWARD, StageKind, Typed};
 use crate::store::{Manifest, Store};
 
 #[derive(Debug, Subcommand)]
 pub enum BankCommand {
     /// Score learned rewards on a bank of gaits: Pearson and Spearman against the true
     /// return over the bank and within its forward gaits, and the backward, still or random
-    /// gaits each pays more than a truly better forward one.
+    /// gaits each pays more than a truly better forward one; beside them, the store's probe
+    /// of each reward where a run with `bank.probe` made one.
     Score(ScoreArgs),
 }
 
@@ -71,21 +73,32 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for reward in &args.rewards {
         let dir = PathBuf::from(reward);
-        let (label, model_dir, env) = if dir.join(REWARD).is_dir() {
-            (reward.clone(), dir.join(REWARD), None)
+        let (label, model_dir, env, probe) = if dir.join(REWARD).is_dir() {
+            (reward.clone(), dir.join(REWARD), None, None)
         } else {
             let m = by_prefix(&manifests, reward)?;
             if m.kind != StageKind::Trex.name() {
                 bail!("{}: a {} artifact, not a learned reward (a trex artifact)", &m.key[..12], m.kind);
             }
-            (format!("{} {}", &m.key[..12], m.node), store.input_dir(&m.key)?.join(REWARD), env_of(m))
+            (format!("{} {}", &m.key[..12], m.node), store.input_dir(&m.key)?.join(REWARD), env_of(m), probe_of(&manifests, &m.key))
         };
         let bank = bank_for(&store, &manifests, &banks, args.bank.as_deref(), env)?;
         let model = RewardEnsemble::load(&model_dir).with_context(|| format!("loading the reward in {}", model_dir.display()))?;
-        rows.push((label, bank.0, score_reward(&model, &bank.1)?));
+        rows.push((label, bank.0, score_reward(&model, &bank.1)?, probe));
     }
     args.table.print(&table(&rows));
     Ok(())
+}
+
+/// The store's probe of a reward (`bank.probe`): its true return and its final policy's
+/// forward term per episode.
+fn probe_of(manifests: &[Manifest], reward: &str) -> Option<(f64, f64)> {
+    manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward)).find_map(
+        |m| match Typed::of(m).ok()?.metrics {
+            Metrics::Probe(x) => Some((x.true_return, x.final_forward)),
+            _ => None,
+        },
+    )
 }
 
 /// The bank to score on: `--bank`, or the store's one bank of `env`; its key and directory.
@@ -115,20 +128,22 @@ fn bank_for(
     Ok((m.key[..12].to_string(), store.input_dir(&m.key)?))
 }
 
-fn table(rows: &[(String, String, BankScore)]) -> Table {
+fn table(rows: &[(String, String, BankScore, Option<(f64, f64)>)]) -> Table {
     let mut columns = vec!["reward", "bank", "pearson", "spearman", "forward_pearson", "forward_spearman"];
     columns.extend(["overpaid_backward", "overpaid_still", "overpaid_random", "misordered"]);
-    columns.extend(["pay_forward", "pay_backward", "pay_still", "pay_random"]);
+    columns.extend(["pay_forward", "pay_backward", "pay_still", "pay_random", "probe_return", "probe_forward"]);
     let x = |v: f64| Cell::opt(Some(v).filter(|v| v.is_finite()), 3);
     let rows = rows
         .iter()
-        .map(|(reward, bank, s)| {
+        .map(|(reward, bank, s, probe)| {
             let mut r =
                 vec![Cell::text(reward), Cell::text(bank), x(s.pearson), x(s.spearman), x(s.forward_pearson), x(s.forward_spearman)];
             r.extend([GaitClass::Backward, GaitClass::Still, GaitClass::Random].map(|c| Cell::int(s.overpaid_of(c))));
             r.push(x(s.misordered));
             let pay = |c: GaitClass| s.per_class.iter().find(|p| p.class == c).map_or(f64::NAN, |p| p.learned_per_step);
             r.extend(GaitClass::ALL.map(|c| x(pay(c))));
+            let one = |v: f64| Cell::opt(Some(v).filter(|v| v.is_finite()), 1);
+            r.extend([probe.map_or(f64::NAN, |p| p.0), probe.map_or(f64::NAN, |p| p.1)].map(one));
             r
         })
         .collect();
