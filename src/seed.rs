@@ -38,6 +38,9 @@ pub enum Purpose {
     StillSet,
     /// `noise.disturbance: weights`: the k-th level's perturbation of BC's weights.
     WeightNoise,
+    /// The reward bench's probe: the k-th episode of its final policy (apart from the
+    /// evaluation's, which score the method's own runs on the same seed).
+    ProbeEpisode,
 }
 
 /// The seed of stream `index` for `purpose`, from the stage seed `seed`.
@@ -57,6 +60,7 @@ pub fn derive(seed: u64, purpose: Purpose, index: u64) -> u64 {
         Purpose::ZeroActionSet => episode(seed ^ 0x2e70, index),
         Purpose::StillSet => episode(seed ^ 0x5711, index),
         Purpose::WeightNoise => episode(seed ^ 0x3e16, index),
+        Purpose::ProbeEpisode => episode(seed ^ 0x960b, index),
     }
 }
 
@@ -68,7 +72,7 @@ mod tests {
     /// Every purpose, in declaration order. `position` below is an exhaustive match, so a new
     /// variant does not compile until it has a position there; list it here too (nothing
     /// fails where it is missing: the tests then leave it out).
-    const ALL: [Purpose; 14] = [
+    const ALL: [Purpose; 15] = [
         Purpose::Episode,
         Purpose::EvalEpisode,
         Purpose::Source,
@@ -83,6 +87,7 @@ mod tests {
         Purpose::ZeroActionSet,
         Purpose::StillSet,
         Purpose::WeightNoise,
+        Purpose::ProbeEpisode,
     ];
 
     fn position(p: Purpose) -> usize {
@@ -101,6 +106,7 @@ mod tests {
             Purpose::ZeroActionSet => 11,
             Purpose::StillSet => 12,
             Purpose::WeightNoise => 13,
+            Purpose::ProbeEpisode => 14,
         }
     }
 

@@ -80,7 +80,7 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     let dir = TempDir::new("bank-report");
     let smoke = std::fs::read_to_string(repo("pipelines/smoke.yaml")).unwrap();
     let tiny = "bank:\n  steps: 6144\n  backward_steps: 2048\n  checkpoints: 2\n  backward_checkpoints: 1\n  episodes: 1\n  \
-                epsilon: [0.5]\n  smooth: [0.5]\n  still: 1\n  random: 1\n  probe: 2048\n";
+                epsilon: [0.5]\n  smooth: [0.5]\n  still: 1\n  random: 1\n  probe: 4096\n";
     let file = dir.join("smoke.yaml");
     std::fs::write(&file, format!("{smoke}{tiny}")).unwrap();
     let store = dir.join("store");
@@ -107,7 +107,7 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     let bank_csv = std::fs::read_to_string(report.join("bank.csv")).unwrap();
     assert_eq!(bank_csv.lines().count(), 5, "a header and one row per learned-reward method: {bank_csv}");
     let probe_at = bank_csv.lines().next().unwrap().split(',').position(|h| h == "probe_return").unwrap();
-    assert!(bank_csv.lines().skip(1).all(|l| l.split(',').nth(probe_at).unwrap().parse::<f64>().is_ok()), "{bank_csv}");
+    assert!(bank_csv.lines().skip(1).all(|l| l.split(',').nth(probe_at).unwrap().parse::<f64>().is_ok_and(f64::is_finite)), "{bank_csv}");
     let accuracy = std::fs::read_to_string(report.join("reward_accuracy.csv")).unwrap();
     let header: Vec<&str> = accuracy.lines().next().unwrap().split(',').collect();
     let at = |c: &str| header.iter().position(|h| *h == c).unwrap();
@@ -127,7 +127,7 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     let from_report = bank_csv.lines().find(|l| l.contains(",drex,")).unwrap().split(',').nth(6).unwrap().parse::<f64>().unwrap();
     assert!((spearman(csv.lines().nth(1).unwrap()) - from_report).abs() < 1e-3, "{csv}\n{bank_csv}");
     let probe_at = csv.lines().next().unwrap().split(',').position(|h| h == "probe_return").unwrap();
-    assert!(csv.lines().nth(1).unwrap().split(',').nth(probe_at).unwrap().parse::<f64>().is_ok(), "the reward's probe: {csv}");
+    assert!(csv.lines().nth(1).unwrap().split(',').nth(probe_at).unwrap().parse::<f64>().is_ok_and(f64::is_finite), "the reward's probe: {csv}");
     // A mistake gets one short message that names the fix.
     let out = idrex(&["bank", "score", "abc", "--store", s]);
     assert!(!out.status.success() && stderr(&out).contains("at least 8 characters"), "{}", stderr(&out));

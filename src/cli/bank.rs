@@ -91,14 +91,19 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
 }
 
 /// The store's probe of a reward (`bank.probe`): its true return and its final policy's
-/// forward term per episode.
+/// forward term per episode, where the store holds one; with several (other compositions,
+/// seeds or lengths), none: the report pairs each with its own PPO run.
 fn probe_of(manifests: &[Manifest], reward: &str) -> Option<(f64, f64)> {
-    manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward)).find_map(
-        |m| match Typed::of(m).ok()?.metrics {
-            Metrics::Probe(x) => Some((x.true_return, x.final_forward)),
-            _ => None,
-        },
-    )
+    let mut found = manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward));
+    let (one, more) = (found.next()?, found.next());
+    if more.is_some() {
+        eprintln!("{}: several probes of this reward; the report pairs each with its PPO run", &reward[..12]);
+        return None;
+    }
+    match Typed::of(one).ok()?.metrics {
+        Metrics::Probe(x) => Some((x.true_return, x.final_forward)),
+        _ => None,
+    }
 }
 
 /// The bank to score on: `--bank`, or the store's one bank of `env`; its key and directory.

@@ -142,6 +142,13 @@ pub fn sizes(spec: &PipelineFile, p: &mut Problems) {
     positive(spec.trex.iterations, &["trex", "iterations"], "trex.iterations");
     positive(spec.trex.window, &["trex", "window"], "trex.window");
     positive(spec.trex.pairs_per_model, &["trex", "pairs_per_model"], "trex.pairs_per_model");
+    // The probe scores the last quarter of its updates: it needs 4 of them at least.
+    if let Some(steps) = spec.bank.as_ref().and_then(|b| b.probe) {
+        let batch = spec.ppo.num_envs * spec.ppo.num_steps;
+        if steps < 4 * batch {
+            p.bad(&["bank", "probe"], format!("bank.probe is {steps} steps, under 4 PPO updates of {batch}; give at least {}", 4 * batch));
+        }
+    }
 }
 
 /// The noise schedule, and T-REX's margin within its span.

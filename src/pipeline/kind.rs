@@ -53,7 +53,8 @@ impl StageKind {
             // (PPO, evaluation) from idrex's own code instead of libtorch's. 3 (PPO and the
             // demonstrator, which PPO trains): the minibatch update's products through
             // kernels::gemm (fused multiply-adds) instead of plain loops.
-            StageKind::Demonstrator | StageKind::Ppo => 3,
+            // The probe is a PPO run: its version follows PPO's.
+            StageKind::Demonstrator | StageKind::Ppo | StageKind::Probe => 3,
             StageKind::Eval => 2,
             _ => 1,
         }

@@ -134,7 +134,7 @@ fn run_node(
             wall_s,
             idrex_version: crate::VERSION.to_string(),
             kernel: Some(node.params.cpu_path()),
-            test_set: mark.filter(|_| node.kind() == StageKind::Eval).cloned(),
+            test_set: mark.filter(|_| matches!(node.kind(), StageKind::Eval | StageKind::Probe)).cloned(),
         };
         store.publish(staging, manifest, forced)?;
         Ok(Status::Computed { wall_s })

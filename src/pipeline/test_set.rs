@@ -102,16 +102,27 @@ pub fn check(p: &Pipeline, g: &Graph, looks: &Looks, stored: &dyn Fn(&str) -> bo
     let keys = g.keys();
     // (env, seed) -> the policies this run evaluates there, and whether it computes any.
     let mut mine: BTreeMap<(EnvId, u64), (BTreeSet<&str>, bool)> = BTreeMap::new();
+    // A probe scores a new policy by the true return on its run's seed: any look already
+    // there makes it another look.
+    let mut probed: BTreeSet<(EnvId, u64)> = BTreeSet::new();
     for n in &g.nodes {
-        let (Params::Eval(e), Inputs::Eval(EvalInputs { policy, .. })) = (&n.params, &n.inputs) else { continue };
-        let at = mine.entry((e.env, n.seed)).or_default();
-        at.0.insert(keys[policy].as_str());
-        at.1 |= !stored(&keys[&n.name]);
+        match (&n.params, &n.inputs) {
+            (Params::Eval(e), Inputs::Eval(EvalInputs { policy, .. })) => {
+                let at = mine.entry((e.env, n.seed)).or_default();
+                at.0.insert(keys[policy].as_str());
+                at.1 |= !stored(&keys[&n.name]);
+            }
+            (Params::Probe(probe), _) if !stored(&keys[&n.name]) => {
+                probed.insert((probe.run.env, n.seed));
+            }
+            _ => {}
+        }
     }
     let others: Vec<&Look> = mine
         .iter()
         .filter(|(_, (_, computes))| *computes)
         .flat_map(|(at, (policies, _))| looks.at.get(at).into_iter().flatten().filter(|l| !policies.contains(l.policy.as_str())))
+        .chain(probed.iter().flat_map(|at| looks.at.get(at).into_iter().flatten()))
         .collect();
     let locked = others.iter().find_map(|l| match &l.mark {
         Some(TestSetMark::Test { study }) => Some((study.clone(), *l)),
@@ -220,6 +231,19 @@ mod tests {
         let used = looks_of(&stored_evals(&other, None));
         let e = check_text(&test, &used, &[], false).unwrap_err().to_string();
         assert!(e.contains("role: test") && e.contains("study `other`"), "{e}");
+    }
+
+    /// A probe scores a policy by the true return on a run's seed: on a test set already
+    /// looked at, it is another look, refused without the flag and marked with it.
+    #[test]
+    fn a_probe_on_a_test_set_is_a_look() {
+        let test = format!("{BASE}name: locked\nrole: test\n");
+        let evals = stored_evals(&test, Some(TestSetMark::Test { study: "locked".into() }));
+        let looks = looks_of(&evals);
+        let probed = format!("{test}bank: {{probe: 8192}}\n");
+        let e = check_text(&probed, &looks, &evals, false).unwrap_err().to_string();
+        assert!(e.contains("role: test") && e.contains("--reuse-test-set"), "{e}");
+        assert_eq!(check_text(&probed, &looks, &evals, true).unwrap(), Some(TestSetMark::Reuse { study: "locked".into() }));
     }
 
     /// Each variant of a sweep is a configuration: a sweep on a test set's seeds is refused like

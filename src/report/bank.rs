@@ -7,7 +7,9 @@ use super::{Artifacts, input_key, method_label};
 use crate::algo::bank::{BankScore, GaitClass};
 use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::role::Role;
-use crate::pipeline::stage::{Metrics, StageKind, Typed};
+use crate::algo::ppo::PpoConfig;
+use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
+use crate::store::Manifest;
 
 /// Each scored reward (its T-REX artifact's key) and its scores.
 pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
@@ -20,16 +22,25 @@ pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
         .collect()
 }
 
-/// Each probed reward (its T-REX artifact's key) and its probe's score
-/// ([`crate::pipeline::stage::probe`]).
-pub fn probes(arts: &Artifacts) -> BTreeMap<String, (f64, f64)> {
+/// The probe of the PPO run `ppo` ([`crate::pipeline::stage::probe`]): the one on its reward,
+/// seed and inputs whose run is `ppo`'s but for its steps. Its true return and its final
+/// policy's forward term per episode; the longest where several lengths were probed.
+pub fn probe_of(arts: &Artifacts, ppo: &Manifest) -> Option<(f64, f64)> {
+    let Some(Typed { params: Params::Ppo(run), .. }) = arts.typed(ppo) else { return None };
+    let reward = input_key(ppo, Role::Reward)?;
     arts.iter()
-        .filter(|m| m.kind == StageKind::Probe.name())
+        .filter(|m| m.kind == StageKind::Probe.name() && m.seed == ppo.seed && input_key(m, Role::Reward) == Some(reward))
+        .filter(|m| input_key(m, Role::Floor) == input_key(ppo, Role::Floor))
         .filter_map(|m| match arts.typed(m)? {
-            Typed { metrics: Metrics::Probe(x), .. } => Some((input_key(m, Role::Reward)?.clone(), (x.true_return, x.final_forward))),
+            Typed { params: Params::Probe(p), metrics: Metrics::Probe(x) } => {
+                let ppo = PpoConfig { total_steps: run.ppo.total_steps, checkpoint_every: run.ppo.checkpoint_every, ..p.run.ppo.clone() };
+                let same = ppo == run.ppo && (p.run.env, p.run.reward, p.run.device) == (run.env, run.reward, run.device);
+                same.then_some((p.run.ppo.total_steps, (x.true_return, x.final_forward)))
+            }
             _ => None,
         })
-        .collect()
+        .max_by_key(|(steps, _)| *steps)
+        .map(|(_, score)| score)
 }
 
 /// `bank.csv`: one row per (env, table, method) whose reward was scored; several rewards (an
@@ -65,18 +76,24 @@ impl BankRow {
 
 pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     let scored = scores(arts);
-    let probed = probes(arts);
     let mut groups: BTreeMap<(String, String, String), BTreeMap<String, &BankScore>> = BTreeMap::new();
+    let mut probed: BTreeMap<(String, String, String), BTreeMap<String, (f64, f64)>> = BTreeMap::new();
     for (m, p, _) in arts.evaluations() {
         let Some(k) = input_key(m, Role::Reward) else { continue };
         let Some(s) = scored.get(k) else { continue };
         let id = (p.env.name().to_string(), p.table(), method_label(p.method, p.iteration));
+        if let Some(probe) = arts.input(m, Role::Policy).and_then(|ppo| probe_of(arts, ppo)) {
+            probed.entry(id.clone()).or_default().insert(k.clone(), probe);
+        }
         groups.entry(id).or_default().insert(k.clone(), s);
     }
     groups
         .into_iter()
         .map(|((env, pipeline, method), by_reward)| {
-            let probes: Vec<(f64, f64)> = by_reward.keys().filter_map(|k| probed.get(k).copied()).collect();
+            let id = (env.clone(), pipeline.clone(), method.clone());
+            let probes: Vec<(f64, f64)> = probed.get(&id).map(|p| p.values().copied().collect()).unwrap_or_default();
+            // A mean over only some of the rewards would pass for all of them.
+            let probes = if probes.len() == by_reward.len() { probes } else { vec![] };
             let mean = |f: fn(&(f64, f64)) -> f64| {
                 if probes.is_empty() { f64::NAN } else { probes.iter().map(f).sum::<f64>() / probes.len() as f64 }
             };

@@ -552,10 +552,10 @@ mod tests {
     #[test]
     fn the_device_is_in_the_keys_of_the_stages_it_changes() {
         use crate::nn::DeviceChoice;
-        let text = format!("{BASE}slurm:\n  default: {{cpus: 1}}\n");
+        let text = format!("{BASE}slurm:\n  default: {{cpus: 1}}\nbank: {{probe: 8192}}\n");
         let p = Pipeline::parse(std::path::Path::new("p.yaml"), &text).unwrap();
         let (cpu, cuda) = (expand(&p.clone().on(DeviceChoice::Cpu)).unwrap(), expand(&p.clone().on(DeviceChoice::Cuda)).unwrap());
-        let on_device = [StageKind::Bc, StageKind::Trex, StageKind::Ppo, StageKind::MultiBcRollouts];
+        let on_device = [StageKind::Bc, StageKind::Trex, StageKind::Ppo, StageKind::MultiBcRollouts, StageKind::Probe];
         for (a, b) in cpu.nodes.iter().zip(&cuda.nodes) {
             let json = a.params.key_json().to_string();
             assert!(!json.contains("device"), "{}: {json}", a.name);

@@ -27,7 +27,7 @@
 //! | bank-policy | 1 | - | policy/, checkpoints/ | bank.rs |
 //! | bank | 1 | forward, backward | rollouts.mcap, bank.json | bank.rs |
 //! | bank-score | 1 | reward, bank | - | bank.rs |
-//! | probe | 1 | reward, floor? | policy/, curve.csv | probe.rs |
+//! | probe | 3 | reward, floor? | policy/, curve.csv | probe.rs |
 pub mod bank;
 pub mod bc;
 pub mod demos;
@@ -235,6 +235,7 @@ impl Params {
             Params::Bc(p) => p.device,
             Params::Trex(p) => p.device,
             Params::Ppo(p) => p.device,
+            Params::Probe(p) => p.run.device,
             Params::MultiBcRollouts(p) => p.device,
             _ => Device::Cpu,
         }

@@ -1,7 +1,7 @@
 //! `probe`: the reward bench's look at what PPO makes of a learned reward, before the RL runs
 //! pay for it. One short PPO run (`bank.probe` steps) on the reward exactly as the method's
 //! runs compose it; its score is the true return of the training episodes that ended in the
-//! last quarter of its steps. Its final policy then acts for `episodes` episodes, as the
+//! last quarter of its steps (the mean over those updates of their episodes' mean). Its final policy then acts for `episodes` episodes, as the
 //! evaluation stage's do, so that on a task that ends the probe says whether the gait moves
 //! or only lives (the forward term; the training curve has no terms). The bank asks whether a reward orders gaits PPO found on the
 //! *true* reward; the probe asks what gait PPO finds on the *learned* one
@@ -26,14 +26,14 @@ pub const TAIL: f64 = 0.25;
 pub struct ProbeParams {
     /// The method's first RL run's parameters with the probe's steps and no checkpoints.
     pub run: PpoParams,
-    /// Episodes of the final policy acting (its sampled actions, on the evaluation's seeds).
+    /// Episodes of the final policy acting (its sampled actions).
     pub episodes: usize,
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ProbeMetrics {
     /// The mean true return of the training episodes that ended in the last [`TAIL`] of the
-    /// run's steps.
+    /// run's steps (the mean over those updates of each update's finished episodes' mean).
     pub true_return: f64,
     /// The same episodes' learned return.
     pub learned_return: Option<f64>,
@@ -53,7 +53,8 @@ pub fn tail_mean(curve: &[CurvePoint], total: usize, tail: f64, get: impl Fn(&Cu
 
 pub fn run(p: &ProbeParams, inputs: &PpoInputs<PathBuf>, ctx: &StageCtx) -> Result<ProbeMetrics> {
     let run = ppo::run(&p.run, inputs, ctx)?;
-    let total = p.run.ppo.total_steps;
+    // The steps PPO took: whole updates, at most `total_steps`.
+    let total = run.curve.last().map_or(0, |c| c.step);
     let true_return = tail_mean(&run.curve, total, TAIL, |c| c.true_return).ok_or_else(|| {
         Error::Invalid(format!(
             "the probe's {total} PPO steps ended no episode in their last {:.0} %: give `bank.probe` more steps",
@@ -64,7 +65,7 @@ pub fn run(p: &ProbeParams, inputs: &PpoInputs<PathBuf>, ctx: &StageCtx) -> Resu
     let policy = ActorCritic::load(&ctx.out.join(POLICY))?;
     let mut env = Env::new(p.run.env)?;
     let meta = TrajMeta { source: "probe".into(), ..Default::default() };
-    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes.max(1), ctx.seed, Purpose::EvalEpisode, &meta);
+    let trajs = rollout::episodes(&mut env, &mut PolicyActor::acting(&policy), p.episodes.max(1), ctx.seed, Purpose::ProbeEpisode, &meta);
     let mean = |f: &dyn Fn(&crate::data::Trajectory) -> f64| trajs.iter().map(f).sum::<f64>() / trajs.len() as f64;
     Ok(ProbeMetrics {
         true_return,
