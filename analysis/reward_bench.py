@@ -79,8 +79,9 @@ def main(store, out, files):
     by_key = {m["key"]: m for m in manifests(store)}
     # The probe of each reward (`bank.probe`): a short PPO run's true return, last quarter.
     # With the final policy's forward term per episode, for a task that ends (moving or living).
-    # A probe made before it rolled its final policy out has no final_forward: the newer wins.
-    probed = sorted((m for m in by_key.values() if m["kind"] == "probe"), key=lambda m: "final_forward" in m["metrics"])
+    # Probes made by earlier versions of the stage may share the store: the newest version wins
+    # (before it rolled its final policy out, a probe had no final_forward).
+    probed = sorted((m for m in by_key.values() if m["kind"] == "probe"), key=lambda m: (m["version"], "final_forward" in m["metrics"]))
     probes = {m["inputs"]["reward"]: m["metrics"] for m in probed}
     outcomes = list(csv.DictReader(open(OUTCOMES)))
     rows = []
@@ -143,6 +144,27 @@ def main(store, out, files):
                     x, y = zip(*pairs)
                     lo, hi = bootstrap(x, y)
                     print(f"{design},{env},{len(pairs)},{score},{outcome},{spearman(x, y):.3f},{lo:.3f},{hi:.3f}")
+
+    # Which failures each flag sees (design 1's bank; the probe is the same on both designs):
+    # a failure is D-REX below BC at the end, by the true return or by the forward term.
+    print("env,flag,outcome,failures_flagged,failures,false_alarms,others")
+    flags = {
+        "bank": lambda r: r["flags"] == 1,
+        "probe": lambda r: r["probe_minus_bc"] < 0,
+        "probe_forward": lambda r: r["probe_forward_minus_bc"] < 0,
+    }
+    for env in sorted({r["env"] for r in unique}):
+        for name, flag in flags.items():
+            for outcome in ("drex_minus_bc", "forward_minus_bc"):
+                sub = [r for r in unique if r["design"] == 1 and r["env"] == env and np.isfinite(r[outcome])]
+                if name != "bank":
+                    sub = [r for r in sub if np.isfinite(r[name + "_minus_bc"])]
+                if not sub:
+                    continue
+                fails = [r for r in sub if r[outcome] < 0]
+                hit = sum(flag(r) for r in fails)
+                false = sum(flag(r) for r in sub if r[outcome] >= 0)
+                print(f"{env},{name},{outcome},{hit},{len(fails)},{false},{len(sub) - len(fails)}")
 
 
 if __name__ == "__main__":
