@@ -127,7 +127,10 @@ fn the_report_and_the_command_carry_the_bank_scores() {
     let from_report = bank_csv.lines().find(|l| l.contains(",drex,")).unwrap().split(',').nth(6).unwrap().parse::<f64>().unwrap();
     assert!((spearman(csv.lines().nth(1).unwrap()) - from_report).abs() < 1e-3, "{csv}\n{bank_csv}");
     let probe_at = csv.lines().next().unwrap().split(',').position(|h| h == "probe_return").unwrap();
-    assert!(csv.lines().nth(1).unwrap().split(',').nth(probe_at).unwrap().parse::<f64>().is_ok_and(f64::is_finite), "the reward's probe: {csv}");
+    assert!(
+        csv.lines().nth(1).unwrap().split(',').nth(probe_at).unwrap().parse::<f64>().is_ok_and(f64::is_finite),
+        "the reward's probe: {csv}"
+    );
     // A mistake gets one short message that names the fix.
     let out = idrex(&["bank", "score", "abc", "--store", s]);
     assert!(!out.status.success() && stderr(&out).contains("at least 8 characters"), "{}", stderr(&out));

@@ -8,8 +8,8 @@ use clap::{Args, Subcommand};
 use crate::algo::bank::{BankScore, GaitClass};
 use crate::log::table::{Cell, Table};
 use crate::nn::RewardEnsemble;
-use crate::pipeline::stage::bank::score_reward;
 use crate::pipeline::role::{Role, recorded_input};
+use crate::pipeline::stage::bank::score_reward;
 use crate::pipeline::stage::{Metrics, Params, REWARD, StageKind, Typed};
 use crate::store::{Manifest, Store};
 
@@ -94,7 +94,8 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
 /// forward term per episode, where the store holds one; with several (other compositions,
 /// seeds or lengths), none: the report pairs each with its own PPO run.
 fn probe_of(manifests: &[Manifest], reward: &str) -> Option<(f64, f64)> {
-    let mut found = manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward));
+    let mut found =
+        manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward));
     let (one, more) = (found.next()?, found.next());
     if more.is_some() {
         eprintln!("{}: several probes of this reward; the report pairs each with its PPO run", &reward[..12]);

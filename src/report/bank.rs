@@ -5,9 +5,9 @@ use std::collections::BTreeMap;
 
 use super::{Artifacts, input_key, method_label};
 use crate::algo::bank::{BankScore, GaitClass};
+use crate::algo::ppo::PpoConfig;
 use crate::log::table::{Cell, Row, Table};
 use crate::pipeline::role::Role;
-use crate::algo::ppo::PpoConfig;
 use crate::pipeline::stage::{Metrics, Params, StageKind, Typed};
 use crate::store::Manifest;
 
@@ -97,7 +97,11 @@ pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
             let mean = |f: fn(&(f64, f64)) -> f64| {
                 if probes.is_empty() { f64::NAN } else { probes.iter().map(f).sum::<f64>() / probes.len() as f64 }
             };
-            BankRow { probe: mean(|p| p.0), probe_forward: mean(|p| p.1), ..row(env, pipeline, method, by_reward.values().copied().collect()) }
+            BankRow {
+                probe: mean(|p| p.0),
+                probe_forward: mean(|p| p.1),
+                ..row(env, pipeline, method, by_reward.values().copied().collect())
+            }
         })
         .collect()
 }

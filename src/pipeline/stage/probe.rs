@@ -9,8 +9,8 @@
 //! sets' own runs predicted their end where the bank did not).
 use std::path::PathBuf;
 
-use super::{POLICY, StageCtx};
 use super::ppo::{self, CurvePoint, PpoInputs, PpoMetrics, PpoParams};
+use super::{POLICY, StageCtx};
 use crate::data::TrajMeta;
 use crate::env::Env;
 use crate::error::{Error, Result};
