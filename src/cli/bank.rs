@@ -11,6 +11,7 @@ use crate::nn::RewardEnsemble;
 use crate::pipeline::role::{Role, recorded_input};
 use crate::pipeline::stage::bank::score_reward;
 use crate::pipeline::stage::{Metrics, Params, REWARD, StageKind, Typed};
+use crate::report::bank::ProbeScore;
 use crate::store::{Manifest, Store};
 
 #[derive(Debug, Subcommand)]
@@ -93,7 +94,7 @@ fn score(args: &ScoreArgs) -> anyhow::Result<()> {
 /// The store's probe of a reward (`bank.probe`): its true return and its final policy's
 /// forward term per episode, where the store holds one; with several (other compositions,
 /// seeds or lengths), none: the report pairs each with its own PPO run.
-fn probe_of(manifests: &[Manifest], reward: &str) -> Option<(f64, f64)> {
+fn probe_of(manifests: &[Manifest], reward: &str) -> Option<ProbeScore> {
     let mut found =
         manifests.iter().filter(|m| m.kind == StageKind::Probe.name() && recorded_input(m, Role::Reward).is_some_and(|k| k == reward));
     let (one, more) = (found.next()?, found.next());
@@ -102,7 +103,7 @@ fn probe_of(manifests: &[Manifest], reward: &str) -> Option<(f64, f64)> {
         return None;
     }
     match Typed::of(one).ok()?.metrics {
-        Metrics::Probe(x) => Some((x.true_return, x.final_forward)),
+        Metrics::Probe(x) => Some(ProbeScore { true_return: x.true_return, forward: x.final_forward }),
         _ => None,
     }
 }
@@ -134,7 +135,10 @@ fn bank_for(
     Ok((m.key[..12].to_string(), store.input_dir(&m.key)?))
 }
 
-fn table(rows: &[(String, String, BankScore, Option<(f64, f64)>)]) -> Table {
+/// A scored reward: its label, its bank, its scores and its probe.
+type Scored = (String, String, BankScore, Option<ProbeScore>);
+
+fn table(rows: &[Scored]) -> Table {
     let mut columns = vec!["reward", "bank", "pearson", "spearman", "forward_pearson", "forward_spearman"];
     columns.extend(["overpaid_backward", "overpaid_still", "overpaid_random", "misordered"]);
     columns.extend(["pay_forward", "pay_backward", "pay_still", "pay_random", "probe_return", "probe_forward"]);
@@ -149,7 +153,7 @@ fn table(rows: &[(String, String, BankScore, Option<(f64, f64)>)]) -> Table {
             let pay = |c: GaitClass| s.per_class.iter().find(|p| p.class == c).map_or(f64::NAN, |p| p.learned_per_step);
             r.extend(GaitClass::ALL.map(|c| x(pay(c))));
             let one = |v: f64| Cell::opt(Some(v).filter(|v| v.is_finite()), 1);
-            r.extend([probe.map_or(f64::NAN, |p| p.0), probe.map_or(f64::NAN, |p| p.1)].map(one));
+            r.extend([probe.map_or(f64::NAN, |p| p.true_return), probe.map_or(f64::NAN, |p| p.forward)].map(one));
             r
         })
         .collect();

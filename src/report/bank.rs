@@ -22,10 +22,21 @@ pub fn scores(arts: &Artifacts) -> BTreeMap<String, BankScore> {
         .collect()
 }
 
+/// A probe's scores ([`crate::pipeline::stage::probe::ProbeMetrics`]): the true return per
+/// episode of its last quarter, and its final policy's forward term per episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProbeScore {
+    pub true_return: f64,
+    pub forward: f64,
+}
+
+/// A row's identity: (env, table, method).
+type RowId = (String, String, String);
+
 /// The probe of the PPO run `ppo` ([`crate::pipeline::stage::probe`]): the one on its reward,
 /// seed and inputs whose run is `ppo`'s but for its steps. Its true return and its final
 /// policy's forward term per episode; the longest where several lengths were probed.
-pub fn probe_of(arts: &Artifacts, ppo: &Manifest) -> Option<(f64, f64)> {
+pub fn probe_of(arts: &Artifacts, ppo: &Manifest) -> Option<ProbeScore> {
     let Some(Typed { params: Params::Ppo(run), .. }) = arts.typed(ppo) else { return None };
     let reward = input_key(ppo, Role::Reward)?;
     arts.iter()
@@ -35,7 +46,7 @@ pub fn probe_of(arts: &Artifacts, ppo: &Manifest) -> Option<(f64, f64)> {
             Typed { params: Params::Probe(p), metrics: Metrics::Probe(x) } => {
                 let ppo = PpoConfig { total_steps: run.ppo.total_steps, checkpoint_every: run.ppo.checkpoint_every, ..p.run.ppo.clone() };
                 let same = ppo == run.ppo && (p.run.env, p.run.reward, p.run.device) == (run.env, run.reward, run.device);
-                same.then_some((p.run.ppo.total_steps, (x.true_return, x.final_forward)))
+                same.then_some((p.run.ppo.total_steps, ProbeScore { true_return: x.true_return, forward: x.final_forward }))
             }
             _ => None,
         })
@@ -76,8 +87,8 @@ impl BankRow {
 
 pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     let scored = scores(arts);
-    let mut groups: BTreeMap<(String, String, String), BTreeMap<String, &BankScore>> = BTreeMap::new();
-    let mut probed: BTreeMap<(String, String, String), BTreeMap<String, (f64, f64)>> = BTreeMap::new();
+    let mut groups: BTreeMap<RowId, BTreeMap<String, &BankScore>> = BTreeMap::new();
+    let mut probed: BTreeMap<RowId, BTreeMap<String, ProbeScore>> = BTreeMap::new();
     for (m, p, _) in arts.evaluations() {
         let Some(k) = input_key(m, Role::Reward) else { continue };
         let Some(s) = scored.get(k) else { continue };
@@ -91,15 +102,15 @@ pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
         .into_iter()
         .map(|((env, pipeline, method), by_reward)| {
             let id = (env.clone(), pipeline.clone(), method.clone());
-            let probes: Vec<(f64, f64)> = probed.get(&id).map(|p| p.values().copied().collect()).unwrap_or_default();
+            let probes: Vec<ProbeScore> = probed.get(&id).map(|p| p.values().copied().collect()).unwrap_or_default();
             // A mean over only some of the rewards would pass for all of them.
             let probes = if probes.len() == by_reward.len() { probes } else { vec![] };
-            let mean = |f: fn(&(f64, f64)) -> f64| {
+            let mean = |f: fn(&ProbeScore) -> f64| {
                 if probes.is_empty() { f64::NAN } else { probes.iter().map(f).sum::<f64>() / probes.len() as f64 }
             };
             BankRow {
-                probe: mean(|p| p.0),
-                probe_forward: mean(|p| p.1),
+                probe: mean(|p| p.true_return),
+                probe_forward: mean(|p| p.forward),
                 ..row(env, pipeline, method, by_reward.values().copied().collect())
             }
         })
