@@ -5,7 +5,9 @@ and forward term), with a 95 % bootstrap interval over replicates.
 
 Reads the store's manifests only (JSON; no idrex code), numpy for the statistics:
 
-    python analysis/reward_bench.py STORE OUT.csv PIPELINE_FILE...
+    python analysis/reward_bench.py STORE OUT.csv PIPELINE_FILE... > correlations.csv
+
+(and flags.csv beside OUT.csv: which failures each flag sees.)
 
 The pipeline files are the committed ones whose rewards the store regenerated (as
 `outcomes.csv` names them): an outcome is paired with a reward when its file is one of them
@@ -147,7 +149,8 @@ def main(store, out, files):
 
     # Which failures each flag sees (design 1's bank; the probe is the same on both designs):
     # a failure is D-REX below BC at the end, by the true return or by the forward term.
-    print("env,flag,outcome,failures_flagged,failures,false_alarms,others")
+    # Written beside OUT as flags.csv (stdout keeps the correlations).
+    lines = ["env,flag,outcome,failures_flagged,failures,false_alarms,others"]
     flags = {
         "bank": lambda r: r["flags"] == 1,
         "probe": lambda r: r["probe_minus_bc"] < 0,
@@ -164,7 +167,9 @@ def main(store, out, files):
                 fails = [r for r in sub if r[outcome] < 0]
                 hit = sum(flag(r) for r in fails)
                 false = sum(flag(r) for r in sub if r[outcome] >= 0)
-                print(f"{env},{name},{outcome},{hit},{len(fails)},{false},{len(sub) - len(fails)}")
+                lines.append(f"{env},{name},{outcome},{hit},{len(fails)},{false},{len(sub) - len(fails)}")
+    with open(os.path.join(os.path.dirname(out), "flags.csv"), "w") as f:
+        f.write("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":
