@@ -87,31 +87,28 @@ impl BankRow {
 
 pub fn rows(arts: &Artifacts) -> Vec<BankRow> {
     let scored = scores(arts);
-    let mut groups: BTreeMap<RowId, BTreeMap<String, &BankScore>> = BTreeMap::new();
-    let mut probed: BTreeMap<RowId, BTreeMap<String, ProbeScore>> = BTreeMap::new();
+    // Each row's rewards: their scores, and their probes where one ran beside an evaluated run.
+    let mut groups: BTreeMap<RowId, BTreeMap<String, (&BankScore, Option<ProbeScore>)>> = BTreeMap::new();
     for (m, p, _) in arts.evaluations() {
         let Some(k) = input_key(m, Role::Reward) else { continue };
         let Some(s) = scored.get(k) else { continue };
         let id = (p.env.name().to_string(), p.table(), method_label(p.method, p.iteration));
-        if let Some(probe) = arts.input(m, Role::Policy).and_then(|ppo| probe_of(arts, ppo)) {
-            probed.entry(id.clone()).or_default().insert(k.clone(), probe);
-        }
-        groups.entry(id).or_default().insert(k.clone(), s);
+        let probe = arts.input(m, Role::Policy).and_then(|ppo| probe_of(arts, ppo));
+        let entry = groups.entry(id).or_default().entry(k.clone()).or_insert((s, None));
+        entry.1 = entry.1.or(probe);
     }
     groups
         .into_iter()
         .map(|((env, pipeline, method), by_reward)| {
-            let id = (env.clone(), pipeline.clone(), method.clone());
-            let probes: Vec<ProbeScore> = probed.get(&id).map(|p| p.values().copied().collect()).unwrap_or_default();
             // A mean over only some of the rewards would pass for all of them.
-            let probes = if probes.len() == by_reward.len() { probes } else { vec![] };
+            let probes: Vec<ProbeScore> = by_reward.values().map(|v| v.1).collect::<Option<_>>().unwrap_or_default();
             let mean = |f: fn(&ProbeScore) -> f64| {
                 if probes.is_empty() { f64::NAN } else { probes.iter().map(f).sum::<f64>() / probes.len() as f64 }
             };
             BankRow {
                 probe: mean(|p| p.true_return),
                 probe_forward: mean(|p| p.forward),
-                ..row(env, pipeline, method, by_reward.values().copied().collect())
+                ..row(env, pipeline, method, by_reward.values().map(|v| v.0).collect())
             }
         })
         .collect()

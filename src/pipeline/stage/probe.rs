@@ -1,9 +1,10 @@
 //! `probe`: the reward bench's look at what PPO makes of a learned reward, before the RL runs
 //! pay for it. One short PPO run (`bank.probe` steps) on the reward exactly as the method's
 //! runs compose it; its score is the true return of the training episodes that ended in the
-//! last quarter of its steps (the mean over those updates of their episodes' mean). Its final policy then acts for `episodes` episodes, as the
-//! evaluation stage's do, so that on a task that ends the probe says whether the gait moves
-//! or only lives (the forward term; the training curve has no terms). The bank asks whether a reward orders gaits PPO found on the
+//! last quarter of its steps (the mean over those updates of their episodes' mean). Its final
+//! policy then acts for `episodes` episodes, as the evaluation stage's do, so that on a task
+//! that ends the probe says whether the gait moves or only lives (the forward term; the
+//! training curve has no terms). The bank asks whether a reward orders gaits PPO found on the
 //! *true* reward; the probe asks what gait PPO finds on the *learned* one
 //! (`analysis/results/reward-bench/README.md`: on HalfCheetah the first fifth of the locked
 //! sets' own runs predicted their end where the bank did not).
