@@ -68,12 +68,17 @@ def bootstrap(x, y, resamples=2000, seed=0):
     return (float(np.percentile(stats, 2.5)), float(np.percentile(stats, 97.5))) if stats else (float("nan"),) * 2
 
 
-def learner(trex):
-    """The learner as `outcomes.csv` writes it."""
+def learner(trex, by_key):
+    """The learner as `outcomes.csv` writes it: T-REX's loss and observation, then the ranked
+    set's settings that a variant changed (absent from the noise stage's parameters unless set)."""
     t = trex["params"]["trex"]
     parts = [t.get("loss", "ranking")]
     if t.get("observation", "all") != "all":
         parts.append("trex.observation=" + t["observation"])
+    noise = by_key.get(trex["inputs"].get("set0"), {}).get("params", {})
+    for field in ("horizon", "still"):
+        if field in noise:
+            parts.append(f"noise.{field}={noise[field]}")
     return "; ".join(parts)
 
 
@@ -97,7 +102,7 @@ def main(store, out, files):
         seed = trex["seed"]
         base, r = seed % STRIDE, seed // STRIDE
         design = 2 if bank["params"].get("mean", 0) > 0 else 1
-        loss = learner(trex)
+        loss = learner(trex, by_key)
         # The committed outcomes of this reward: same task, seed set, replicate and learner.
         matches = [
             o for o in outcomes
@@ -115,6 +120,10 @@ def main(store, out, files):
                 "overpaid": overpaid, "misordered": s["misordered"], "flags": int(overpaid > 0 or s["forward_spearman"] < 0.5),
                 "probe_minus_bc": probes.get(trex["key"], {}).get("true_return", float("nan")) - bc, "minus_bc": -bc,
                 "probe_forward_minus_bc": probes.get(trex["key"], {}).get("final_forward", float("nan")) - bf,
+                "minus_bc_forward": -bf,
+                "probe_return": probes.get(trex["key"], {}).get("true_return", float("nan")),
+                "probe_forward": probes.get(trex["key"], {}).get("final_forward", float("nan")),
+                "drex_return": dr, "drex_forward": df,
                 "drex_minus_bc": dr - bc, "forward_minus_bc": df - bf, "pipeline_file": o["pipeline_file"],
                 "notes": o["notes"][:120],
             })
@@ -137,9 +146,14 @@ def main(store, out, files):
             sub = [r for r in unique if r["design"] == design and r["env"] == env and np.isfinite(r["drex_minus_bc"])]
             if len(sub) < 3:
                 continue
-            # minus_bc, BC's return alone: the control for probe_minus_bc (both share "minus BC").
-            for score in ("spearman", "forward_spearman", "misordered", "probe_minus_bc", "probe_forward_minus_bc", "minus_bc"):
-                for outcome in ("drex_minus_bc", "forward_minus_bc"):
+            # minus_bc and minus_bc_forward, BC's return and forward term alone: the controls for
+            # probe_minus_bc and probe_forward_minus_bc (a score and its outcome share "minus BC").
+            scores = ("spearman", "forward_spearman", "misordered", "probe_minus_bc", "probe_forward_minus_bc", "minus_bc", "minus_bc_forward", "probe_return", "probe_forward")
+            for score in scores:
+                # The raw pairs (a probe's return against D-REX's own, no BC subtracted from either)
+                # ask whether the probe sees the gait PPO will find, free of the shared BC term.
+                raw = {"probe_return": ("drex_return",), "probe_forward": ("drex_forward",)}
+                for outcome in raw.get(score, ("drex_minus_bc", "forward_minus_bc")):
                     pairs = [(r[score], r[outcome]) for r in sub if np.isfinite(r[outcome]) and np.isfinite(r[score])]
                     if len(pairs) < 3:
                         continue
