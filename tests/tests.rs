@@ -18,5 +18,6 @@ mod reliability;
 mod report_html;
 mod rliable;
 mod s3_proxy;
+mod screen;
 mod skips;
 mod sweep;

@@ -1,0 +1,56 @@
+//! Issue 77's screen reader (`analysis/screen.py`) on the real plan of the round-3 tuning file:
+//! it finds every variant's probe by the plan's keys and applies the declared rule (at least 7
+//! of 10 replicates above `shipped`; the best passing go to PPO).
+use crate::util::{TempDir, idrex, python, repo, stderr, stdout};
+
+#[test]
+fn the_screen_reads_the_plan_and_applies_the_rule() {
+    let dir = TempDir::new("screen");
+    let store = dir.join("store");
+    std::fs::create_dir_all(&store).unwrap();
+    let file = repo("analysis/results/reward-search3/tuning-halfcheetah.yaml");
+    let plan = idrex(&["pipeline", "plan", file.to_str().unwrap(), "--store", store.to_str().unwrap()]);
+    assert!(plan.status.success(), "{}", stderr(&plan));
+    let plan = stdout(&plan);
+    // A probe per variant and replicate, stored under its planned key: `aligned` above the
+    // baseline on 8 of 10 (passes), `ou` on 6 (fails), every other variant tied with it.
+    let mut probes = 0;
+    for line in plan.lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let (Some(key), Some(node)) = (f.get(1), f.get(2)) else { continue };
+        let Some(head) = node.strip_suffix("/drex/trex/probe") else { continue };
+        let (variant, r) = head.rsplit_once('/').unwrap_or(("shipped", head));
+        let r: u32 = r.trim_start_matches('r').parse().unwrap();
+        let score = match (variant, r) {
+            ("aligned", 0..8) => 110.0,
+            ("aligned", _) => 90.0,
+            ("ou", 0..6) => 120.0,
+            ("ou", _) => 80.0,
+            _ => 100.0,
+        };
+        let manifest = format!(r#"{{"kind":"probe","node":"{node}","metrics":{{"true_return":{score}}},"wall_s":15.0}}"#);
+        let at = store.join(format!("{key}{}", "0".repeat(52)));
+        std::fs::create_dir_all(&at).unwrap();
+        std::fs::write(at.join("manifest.json"), manifest).unwrap();
+        probes += 1;
+    }
+    assert_eq!(probes, 90, "9 variants x 10 replicates:\n{plan}");
+    let mut child = std::process::Command::new(python())
+        .arg(repo("analysis/screen.py"))
+        .arg(&store)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child.stdin.take().unwrap().write_all(plan.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = stdout(&out);
+    let row = |v: &str| csv.lines().find(|l| l.starts_with(&format!("{v},"))).unwrap_or_else(|| panic!("{v}:\n{csv}")).to_string();
+    assert_eq!(csv.lines().count(), 10, "{csv}");
+    assert!(row("aligned").starts_with("aligned,10,10,8,10.0,0.0547,110.0,True,True,"), "{csv}");
+    assert!(row("ou").starts_with("ou,10,10,6,20.0,0.3770,120.0,False,,"), "{csv}");
+    assert!(row("held").starts_with("held,10,10,0,0.0,,100.0,False,,"), "{csv}");
+}
