@@ -1,22 +1,11 @@
 //! `idrex exp show` and `exp diff` on a real store: two studies of the smoke pipeline (BC and
 //! D-REX, two replicates on the same seeds) that differ in PPO's step budget only. The CSV
 //! and JSON are read back with Python's csv and json modules.
-use std::process::Command;
 
-use crate::util::{TempDir, idrex, python, repo, stderr, stdout};
+use crate::util::{TempDir, idrex, python_with_input, repo, stderr, stdout};
 
 fn py(code: &str, input: &str) -> String {
-    use std::io::Write;
-    let mut child = Command::new(python())
-        .arg("-c")
-        .arg(code)
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = python_with_input(&["-c", code], input);
     assert!(out.status.success(), "python failed: {}\non:\n{input}", stderr(&out));
     stdout(&out)
 }
@@ -120,14 +109,9 @@ print(len(rows), sorted(set(r[sys.argv[2]] for r in rows)))
     let table = |args: &[&str], kind: &str, column: &str| {
         let out = idrex(args);
         assert!(out.status.success(), "{args:?}: {}", stderr(&out));
-        let mut child = Command::new(python())
-            .args(["-c", check, kind, column])
-            .stdin(std::process::Stdio::piped())
-            .stdout(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        std::io::Write::write_all(&mut child.stdin.take().unwrap(), &out.stdout).unwrap();
-        String::from_utf8(child.wait_with_output().unwrap().stdout).unwrap().trim().to_string()
+        let read = python_with_input(&["-c", check, kind, column], &out.stdout);
+        assert!(read.status.success(), "{}", stderr(&read));
+        String::from_utf8(read.stdout).unwrap().trim().to_string()
     };
     let stored = std::fs::read_dir(&store).unwrap().flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count();
     assert_eq!(table(&["verify", "--store", s, "--csv"], "csv", "state"), format!("{stored} ['intact']"));

@@ -1,7 +1,7 @@
 //! Issue 77's screen reader (`analysis/screen.py`) on the real plan of the round-3 tuning file:
 //! it finds every variant's probe by the plan's keys and applies the declared rule (at least 7
 //! of 10 replicates above `shipped`; the best passing go to PPO).
-use crate::util::{TempDir, idrex, python, repo, stderr, stdout};
+use crate::util::{TempDir, idrex, python_with_input, repo, stderr, stdout};
 
 #[test]
 fn the_screen_reads_the_plan_and_applies_the_rule() {
@@ -35,17 +35,7 @@ fn the_screen_reads_the_plan_and_applies_the_rule() {
         probes += 1;
     }
     assert_eq!(probes, 90, "9 variants x 10 replicates:\n{plan}");
-    let mut child = std::process::Command::new(python())
-        .arg(repo("analysis/screen.py"))
-        .arg(&store)
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    use std::io::Write;
-    child.stdin.take().unwrap().write_all(plan.as_bytes()).unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = python_with_input(&[repo("analysis/screen.py"), store.clone()], &plan);
     assert!(out.status.success(), "{}", stderr(&out));
     let csv = stdout(&out);
     let row = |v: &str| csv.lines().find(|l| l.starts_with(&format!("{v},"))).unwrap_or_else(|| panic!("{v}:\n{csv}")).to_string();

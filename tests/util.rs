@@ -166,3 +166,17 @@ pub fn libtest_selects(name: &str, args: &[String]) -> bool {
     let matches = |f: &String| if exact { f == name } else { name.contains(f.as_str()) };
     !ignored && (filters.is_empty() || filters.iter().any(matches)) && !skips.iter().any(matches)
 }
+
+/// The bootstrap's Python run with these arguments and `input` on its standard input.
+pub fn python_with_input<S: AsRef<std::ffi::OsStr>>(args: &[S], input: impl AsRef<[u8]>) -> Output {
+    use std::io::Write;
+    let mut child = Command::new(python())
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input.as_ref()).unwrap();
+    child.wait_with_output().unwrap()
+}
