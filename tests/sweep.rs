@@ -80,6 +80,21 @@ print("ok")
 "#;
     let py = Command::new(python()).args(["-c", check, report.join("sweeps.csv").to_str().unwrap()]).output().unwrap();
     assert!(py.status.success() && stdout(&py).trim() == "ok", "{}{}", stdout(&py), stderr(&py));
+    // The decision: D-REX's variant against the baseline's, Holm over a family of one; BC is
+    // shared and left out, and two replicates cannot decide (the sign test's floor is 0.25).
+    assert!(md.contains("### Sweeps' variants against their baseline, corrected (final policy)"), "{md}");
+    let check = r#"
+import csv, sys
+rows = list(csv.DictReader(open(sys.argv[1])))
+assert {r["method"] for r in rows} == {"drex"} and "return" in {r["measure"] for r in rows}, rows
+for r in rows:
+    assert r["study"] == "s[reward.ceiling=none]" and r["baseline"] == "s[reward.ceiling=0.75]", r
+    assert r["paired_replicates"] == "2" and r["family"] == "1" and r["decided"] == "no", r
+    assert float(r["sign_test_p"]) >= 0.25 and float(r["holm_p"]) == float(r["sign_test_p"]), r
+print("ok")
+"#;
+    let py = Command::new(python()).args(["-c", check, report.join("sweep_decisions.csv").to_str().unwrap()]).output().unwrap();
+    assert!(py.status.success() && stdout(&py).trim() == "ok", "{}{}", stdout(&py), stderr(&py));
     let show = idrex(&["exp", "show", "--store", s, "--csv"]);
     let show = stdout(&show);
     assert!(

@@ -192,6 +192,8 @@ pub struct Tables {
     pub improvement: Vec<studies::ImprovementRow>,
     /// Sweeps' variants, each against its baseline variant.
     pub sweeps: Vec<sweeps::SweepRow>,
+    /// Each sweep's variants against its baseline, corrected per sweep (needs the terms).
+    pub decisions: Vec<sweeps::DecisionRow>,
     /// Multi-BC's clones against their sources.
     pub clones: Vec<clones::CloneRow>,
     /// (env, table) -> the demonstrations' returns.
@@ -221,10 +223,11 @@ impl Tables {
         let src =
             questions::Sources { protocols: &self.protocols, terms: &self.terms, demos: &self.demo_returns, accuracy: &self.accuracy };
         self.answers = questions::ask(&src);
+        self.decisions = sweeps::decide(&self.sweeps, &src);
     }
 
     /// Every table the report writes as a file, by file stem (`returns` -> `returns.csv`);
-    /// the studies', looks' and clones' only where the store has any.
+    /// the studies' where there are any, and the others only where they have rows.
     pub fn files(&self) -> Vec<(&'static str, Table)> {
         let mut out = vec![
             ("returns", Table::of(&self.returns)),
@@ -236,30 +239,18 @@ impl Tables {
             out.push(("aggregate", Table::of(&self.aggregate)));
             out.push(("improvement", Table::of(&self.improvement)));
         }
-        if !self.sweeps.is_empty() {
-            out.push(("sweeps", Table::of(&self.sweeps)));
-        }
-        if !self.looks.is_empty() {
-            out.push(("looks", Table::of(&self.looks)));
-        }
-        if !self.clones.is_empty() {
-            out.push(("clones", Table::of(&self.clones)));
-        }
-        if !self.terms.is_empty() {
-            out.push(("terms", Table::of(&self.terms)));
-        }
-        if !self.gains.is_empty() {
-            out.push(("gains", Table::of(&self.gains)));
-        }
-        if !self.bank.is_empty() {
-            out.push(("bank", Table::of(&self.bank)));
-        }
-        if !self.answers.questions.is_empty() {
-            out.push(("questions", Table::of(&self.answers.questions)));
-        }
-        if !self.answers.correlations.is_empty() {
-            out.push(("correlations", Table::of(&self.answers.correlations)));
-        }
+        let optional = [
+            ("sweeps", Table::of(&self.sweeps)),
+            ("looks", Table::of(&self.looks)),
+            ("clones", Table::of(&self.clones)),
+            ("terms", Table::of(&self.terms)),
+            ("gains", Table::of(&self.gains)),
+            ("bank", Table::of(&self.bank)),
+            ("questions", Table::of(&self.answers.questions)),
+            ("sweep_decisions", Table::of(&self.decisions)),
+            ("correlations", Table::of(&self.answers.correlations)),
+        ];
+        out.extend(optional.into_iter().filter(|(_, t)| !t.rows.is_empty()));
         out
     }
 }
@@ -297,6 +288,7 @@ pub fn build(store: &Artifacts) -> Result<Tables> {
         bank: bank::rows(store),
         gains: Vec::new(),
         answers: questions::Answers::default(),
+        decisions: Vec::new(),
     })
 }
 

@@ -167,9 +167,9 @@ pub struct Sources<'a> {
 }
 
 /// A (env, study) with two or more replicates: replicate -> its table's name.
-type Studies<'a> = BTreeMap<(&'a str, &'a str), BTreeMap<usize, &'a str>>;
+pub(super) type Studies<'a> = BTreeMap<(&'a str, &'a str), BTreeMap<usize, &'a str>>;
 
-fn studies<'a>(protocols: &'a [ProtocolRow]) -> Studies<'a> {
+pub(super) fn studies<'a>(protocols: &'a [ProtocolRow]) -> Studies<'a> {
     let mut out: Studies = BTreeMap::new();
     for r in protocols {
         out.entry((&r.env, &r.study)).or_default().insert(r.replicate, &r.pipeline);
@@ -180,7 +180,7 @@ fn studies<'a>(protocols: &'a [ProtocolRow]) -> Studies<'a> {
 
 impl Sources<'_> {
     /// Per replicate of (env, study): one side's value by `measure`, where known.
-    fn values(&self, env: &str, tables: &BTreeMap<usize, &str>, side: Baseline, measure: Measure) -> BTreeMap<usize, f64> {
+    pub(super) fn values(&self, env: &str, tables: &BTreeMap<usize, &str>, side: Baseline, measure: Measure) -> BTreeMap<usize, f64> {
         let label = |m: Method| super::method_label(m, 2);
         tables
             .iter()
@@ -404,11 +404,11 @@ pub fn markdown(a: &Answers) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::report::studies::tests::row;
 
-    fn terms(table: &str, method: &str, forward: f64, length: f64) -> TermRow {
+    pub(in crate::report) fn terms(table: &str, method: &str, forward: f64, length: f64) -> TermRow {
         TermRow {
             env: "Hopper-v5".into(),
             pipeline: table.into(),

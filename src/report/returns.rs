@@ -145,6 +145,7 @@ pub fn markdown(t: &Tables) -> String {
     out.push_str(&looks::markdown(&t.looks));
     out.push_str(&studies::markdown(&t.aggregate, &t.improvement));
     out.push_str(&super::sweeps::markdown(&t.sweeps));
+    out.push_str(&super::sweeps::decisions_markdown(&t.decisions));
     out.push_str("## Ground-truth return (mean ± std over R runs x episodes; best run average in brackets)\n\n");
     let mut table = Table { columns: method_columns(&["env", "pipeline", "demos avg", "demos best"]), rows: vec![] };
     let mut groups: Vec<(&str, &str)> = t.returns.iter().map(|r| (r.env.as_str(), r.pipeline.as_str())).collect();

@@ -7,11 +7,13 @@ use std::collections::BTreeMap;
 
 use super::comparisons::compare;
 use super::improvement::{LEGEND, improvement_cell};
+use super::questions::{Baseline, LEVEL, Measure, Sources, studies};
 use super::studies::AggregateRow;
-use super::{Protocol, num};
+use super::{Protocol, RESAMPLES, num};
 use crate::log::table::{Cell, Row, Table};
+use crate::pipeline::Method;
 use crate::pipeline::stage::eval::VariantTag;
-use crate::stats::Improvement;
+use crate::stats::{Improvement, holm, mean};
 
 /// One variant's method in a sweep.
 #[derive(Debug, Clone, PartialEq)]
@@ -143,6 +145,145 @@ pub fn markdown(rows: &[SweepRow]) -> String {
     out
 }
 
+/// One sweep variant's method against the baseline variant's, by one measure, final policy,
+/// paired by replicate: the decision a sweep exists for. Holm corrects together the variants
+/// of one (sweep, env, method, measure), the family a search declares ("several variants
+/// are corrected together"); which measure decides a task is the search's declared choice.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DecisionRow {
+    pub sweep: String,
+    pub env: String,
+    pub study: String,
+    pub settings: String,
+    pub baseline: String,
+    pub method: Method,
+    pub measure: Measure,
+    /// Means over the paired replicates.
+    pub variant_mean: f64,
+    pub baseline_mean: f64,
+    pub improvement: Improvement,
+    pub holm_p: f64,
+    pub family: usize,
+}
+
+impl DecisionRow {
+    /// Better than the baseline: rliable's interval above 0.5 and the corrected p under
+    /// [`LEVEL`], as the report's questions.
+    pub fn decided(&self) -> bool {
+        self.improvement.unpaired_ci.0 > 0.5 && self.holm_p < LEVEL
+    }
+}
+
+/// Every variant of every sweep against its baseline, per method and measure, where both
+/// have two or more paired replicates and not every pair ties (a method whose stages the
+/// variant does not change, such as BC, ties on every replicate and is left out).
+pub fn decide(rows: &[SweepRow], src: &Sources) -> Vec<DecisionRow> {
+    let tables = studies(src.protocols);
+    let mut out: Vec<DecisionRow> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for r in rows.iter().filter(|r| r.protocol == Protocol::Final && r.study != r.baseline) {
+        if !seen.insert((&r.env, &r.study)) {
+            continue;
+        }
+        let (Some(mine), Some(theirs)) = (tables.get(&(&*r.env, &*r.study)), tables.get(&(&*r.env, &*r.baseline))) else { continue };
+        for method in Method::ALL {
+            for measure in [Measure::Return, Measure::Forward] {
+                let x = src.values(&r.env, mine, Baseline::Method(method), measure);
+                let y = src.values(&r.env, theirs, Baseline::Method(method), measure);
+                let pairs: Vec<(f64, f64)> = x.iter().filter_map(|(rep, a)| y.get(rep).map(|b| (*a, *b))).collect();
+                if pairs.len() < 2 || pairs.iter().all(|(a, b)| a == b) {
+                    continue;
+                }
+                let (xs, ys): (Vec<f64>, Vec<f64>) = pairs.iter().copied().unzip();
+                out.push(DecisionRow {
+                    sweep: r.sweep.clone(),
+                    env: r.env.clone(),
+                    study: r.study.clone(),
+                    settings: r.settings.clone(),
+                    baseline: r.baseline.clone(),
+                    method,
+                    measure,
+                    variant_mean: mean(&xs).unwrap_or(f64::NAN),
+                    baseline_mean: mean(&ys).unwrap_or(f64::NAN),
+                    improvement: Improvement::of(&pairs, RESAMPLES, 3),
+                    holm_p: f64::NAN,
+                    family: 0,
+                });
+            }
+        }
+    }
+    let family_of = |d: &DecisionRow| (d.sweep.clone(), d.env.clone(), d.method, d.measure.name());
+    let families: std::collections::BTreeSet<_> = out.iter().map(family_of).collect();
+    for f in families {
+        let members: Vec<usize> = (0..out.len()).filter(|&i| family_of(&out[i]) == f).collect();
+        let corrected = holm(&members.iter().map(|&i| out[i].improvement.sign_p).collect::<Vec<_>>());
+        let size = corrected.iter().filter(|p| p.is_finite()).count();
+        for (&i, p) in members.iter().zip(corrected) {
+            out[i].holm_p = p;
+            out[i].family = size;
+        }
+    }
+    out
+}
+
+/// `sweep_decisions.csv`: one row per (sweep, env, variant, method, measure).
+impl Row for DecisionRow {
+    fn header() -> Vec<&'static str> {
+        let mut h = vec!["sweep", "env", "study", "settings", "baseline", "method", "measure", "variant_mean", "baseline_mean"];
+        h.extend(super::improvement::COLUMNS.iter().map(|c| if *c == "replicates" { "paired_replicates" } else { c }));
+        h.extend(["holm_p", "family", "decided"]);
+        h
+    }
+
+    fn cells(&self) -> Vec<Cell> {
+        let mut c = vec![
+            Cell::text(&self.sweep),
+            Cell::text(&self.env),
+            Cell::text(&self.study),
+            Cell::text(&self.settings),
+            Cell::text(&self.baseline),
+            Cell::text(self.method.name()),
+            Cell::text(self.measure.name()),
+            Cell::num(self.variant_mean),
+            Cell::num(self.baseline_mean),
+        ];
+        c.extend(super::improvement::cells(&self.improvement));
+        c.extend([Cell::opt(Some(self.holm_p), 3), Cell::int(self.family), Cell::text(if self.decided() { "yes" } else { "no" })]);
+        c
+    }
+}
+
+/// The decisions' section of `report.md`, after the sweeps'.
+pub fn decisions_markdown(rows: &[DecisionRow]) -> String {
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut out = format!(
+        "\n### Sweeps' variants against their baseline, corrected (final policy)\n\n\
+         Per sweep, environment, method and measure (the true return, or the forward term alone per episode), each variant \
+         against the baseline variant on the replicates both ran; the variants' sign-test p are corrected together by Holm's \
+         method within that family. \"yes\" needs rliable's interval above 0.5 and the corrected p under {LEVEL}.\n\n"
+    );
+    let columns =
+        ["sweep", "env", "method", "measure", "variant", "variant mean", "baseline mean", "P [95 % CI]; paired", "Holm p (of)", "better"];
+    let cells = rows.iter().map(|d| {
+        vec![
+            Cell::text(&d.sweep),
+            Cell::text(&d.env),
+            Cell::text(d.method.label()),
+            Cell::text(d.measure.name()),
+            Cell::text(if d.settings.is_empty() { d.study.clone() } else { d.settings.clone() }),
+            Cell::text(num(Some(d.variant_mean))),
+            Cell::text(num(Some(d.baseline_mean))),
+            Cell::text(improvement_cell(&d.improvement)),
+            Cell::text(format!("{:.3} ({})", d.holm_p, d.family)),
+            Cell::text(if d.decided() { "yes" } else { "no" }),
+        ]
+    });
+    out.push_str(&Table { columns: columns.map(String::from).to_vec(), rows: cells.collect() }.markdown());
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -181,5 +322,48 @@ mod tests {
         assert_eq!(csv.lines().count(), 4, "{csv}");
         assert!(csv.lines().next().unwrap().starts_with("sweep,settings,baseline,env,study,method,protocol,replicates,"), "{csv}");
         assert!(csv.lines().next().unwrap().contains(",paired_replicates,rliable_probability,"), "{csv}");
+    }
+
+    /// Three variants on 10 replicates, D-REX by the true return: `a` above on all 10 by far,
+    /// `c` on 9 by far, `b` on 9 by a hair (its sign test passes Holm, rliable's interval
+    /// does not); BC is shared and ties, so it is no decision. By the forward term only `a`
+    /// has terms, a family of one.
+    #[test]
+    fn variants_are_decided_by_both_forms_and_holm_per_family() {
+        use crate::report::questions::tests::terms;
+        let table = |s: &str, r: usize| if r == 0 { s.to_string() } else { format!("{s}/r{r}") };
+        let (mut protocols, mut t) = (Vec::new(), Vec::new());
+        for r in 0..10 {
+            let base = 300.0 + 10.0 * r as f64;
+            let one_below = |up: f64| if r == 9 { base - up } else { base + up };
+            for (study, drex) in [("s", base), ("s[a]", base + 1000.0), ("s[b]", one_below(0.5)), ("s[c]", one_below(1000.0))] {
+                protocols.push(row(study, r, "bc", &[100.0]));
+                protocols.push(row(study, r, "drex", &[drex]));
+            }
+            t.push(terms(&table("s", r), "drex", 10.0, 1000.0));
+            t.push(terms(&table("s[a]", r), "drex", 20.0, 1000.0));
+        }
+        let (agg, _) = aggregate(&protocols, &BTreeMap::new());
+        let tags: BTreeMap<String, VariantTag> = ["a", "b", "c"].map(|v| (format!("s[{v}]"), tag(v))).into();
+        let demos = BTreeMap::new();
+        let src = Sources { protocols: &protocols, terms: &t, demos: &demos, accuracy: &[] };
+        let out = decide(&super::rows(&agg, &tags), &src);
+        let got: Vec<(&str, &str, usize, bool)> =
+            out.iter().map(|d| (d.settings.as_str(), d.measure.name(), d.family, d.decided())).collect();
+        assert_eq!(
+            got,
+            [("a", "return", 3, true), ("a", "forward", 1, true), ("b", "return", 3, false), ("c", "return", 3, true)],
+            "BC ties everywhere and is left out"
+        );
+        assert!(out.iter().all(|d| d.method == Method::Drex));
+        let b = &out[2];
+        assert_eq!((b.improvement.wins, b.improvement.pairs), (9, 10));
+        assert!(b.holm_p < LEVEL && b.improvement.unpaired_ci.0 <= 0.5, "the sign test alone would have said yes: {b:?}");
+        assert!((out[0].holm_p - 3.0 / 1024.0).abs() < 1e-12 && (out[3].holm_p - 2.0 * 11.0 / 1024.0).abs() < 1e-12);
+        let md = decisions_markdown(&out);
+        assert!(md.contains("| s | Hopper-v5 | D-REX | return | b |") && md.contains("| 0.021 (3) | no |"), "{md}");
+        let csv = Table::of(&out).csv();
+        assert_eq!(csv.lines().count(), 5, "{csv}");
+        assert!(csv.lines().next().unwrap().ends_with(",sign_test_p,warning,holm_p,family,decided"), "{csv}");
     }
 }
