@@ -35,20 +35,18 @@ pub struct SweepRow {
 
 /// The sweeps' rows: every aggregated study a tag names (a variant, or a baseline).
 pub fn rows(aggregate: &[AggregateRow], tags: &BTreeMap<String, VariantTag>) -> Vec<SweepRow> {
-    // sweep -> baseline study, and study -> (sweep, settings).
-    let mut members: BTreeMap<&str, (&str, String)> = BTreeMap::new();
-    let mut baselines: BTreeMap<&str, &str> = BTreeMap::new();
+    // study -> (sweep, settings, baseline): each variant's own baseline, since two sweeps of
+    // one file (two `-S` runs) share the sweep's name but not their baseline.
+    let mut members: BTreeMap<&str, (&str, String, &str)> = BTreeMap::new();
     for (study, t) in tags {
-        members.insert(study, (&t.sweep, t.settings.join(",")));
-        baselines.insert(&t.sweep, &t.baseline);
+        members.insert(study, (&t.sweep, t.settings.join(","), &t.baseline));
     }
-    for (sweep, baseline) in &baselines {
-        members.entry(baseline).or_insert((sweep, String::new()));
+    for t in tags.values() {
+        members.entry(&t.baseline).or_insert((&t.sweep, String::new(), &t.baseline));
     }
     let mut out = Vec::new();
     for a in aggregate {
-        let Some((sweep, settings)) = members.get(a.study.as_str()) else { continue };
-        let baseline = baselines[sweep];
+        let Some(&(sweep, ref settings, baseline)) = members.get(a.study.as_str()) else { continue };
         let against_baseline = (a.study != baseline)
             .then(|| {
                 compare(aggregate, &a.study, baseline)
@@ -71,8 +69,9 @@ pub fn rows(aggregate: &[AggregateRow], tags: &BTreeMap<String, VariantTag>) -> 
     }
     // The baseline first, then the variants in name order; methods as aggregated.
     out.sort_by(|x, y| {
-        (&x.sweep, &x.env, x.protocol, x.study != x.baseline, &x.study).cmp(&(
+        (&x.sweep, &x.baseline, &x.env, x.protocol, x.study != x.baseline, &x.study).cmp(&(
             &y.sweep,
+            &y.baseline,
             &y.env,
             y.protocol,
             y.study != y.baseline,
@@ -112,11 +111,13 @@ pub fn markdown(rows: &[SweepRow]) -> String {
     let mut out = String::from(
         "\n## Sweeps (per replicate: the mean of its runs' mean returns; 95 % intervals resample replicates, then runs within them)\n",
     );
-    let mut groups: Vec<(&str, &str, Protocol)> = rows.iter().map(|r| (r.sweep.as_str(), r.env.as_str(), r.protocol)).collect();
+    let mut groups: Vec<(&str, &str, &str, Protocol)> =
+        rows.iter().map(|r| (r.sweep.as_str(), r.baseline.as_str(), r.env.as_str(), r.protocol)).collect();
     groups.dedup();
-    for (sweep, env, protocol) in groups {
-        let mine: Vec<&SweepRow> = rows.iter().filter(|r| r.sweep == sweep && r.env == env && r.protocol == protocol).collect();
-        out.push_str(&format!("\n### Sweep `{sweep}`, {env}: {} (baseline `{}`)\n\n", protocol.title(), mine[0].baseline));
+    for (sweep, baseline, env, protocol) in groups {
+        let mine: Vec<&SweepRow> =
+            rows.iter().filter(|r| r.sweep == sweep && r.baseline == baseline && r.env == env && r.protocol == protocol).collect();
+        out.push_str(&format!("\n### Sweep `{sweep}`, {env}: {} (baseline `{baseline}`)\n\n", protocol.title()));
         let columns = ["variant", "settings", "method", "replicates (runs)", "mean [95 % CI]", "IQM [95 % CI]", "against the baseline"];
         let ci = |v: f64, (lo, hi): (f64, f64)| format!("{} [{}, {}]", num(Some(v)), num(Some(lo)), num(Some(hi)));
         let cells = mine.iter().map(|r| {
@@ -147,8 +148,9 @@ pub fn markdown(rows: &[SweepRow]) -> String {
 
 /// One sweep variant's method against the baseline variant's, by one measure, final policy,
 /// paired by replicate: the decision a sweep exists for. Holm corrects together the variants
-/// of one (sweep, env, method, measure), the family a search declares ("several variants
-/// are corrected together"); which measure decides a task is the search's declared choice.
+/// of one (sweep, baseline, env, method, measure), the family a search declares ("several
+/// variants are corrected together"); which measure decides a task is the search's declared
+/// choice. The methods are compared at K = 2 (an iteration past it is in `sweeps.csv` only).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DecisionRow {
     pub sweep: String,
@@ -212,7 +214,7 @@ pub fn decide(rows: &[SweepRow], src: &Sources) -> Vec<DecisionRow> {
             }
         }
     }
-    let family_of = |d: &DecisionRow| (d.sweep.clone(), d.env.clone(), d.method, d.measure.name());
+    let family_of = |d: &DecisionRow| (d.sweep.clone(), d.baseline.clone(), d.env.clone(), d.method, d.measure.name());
     let families: std::collections::BTreeSet<_> = out.iter().map(family_of).collect();
     for f in families {
         let members: Vec<usize> = (0..out.len()).filter(|&i| family_of(&out[i]) == f).collect();
@@ -322,6 +324,39 @@ mod tests {
         assert_eq!(csv.lines().count(), 4, "{csv}");
         assert!(csv.lines().next().unwrap().starts_with("sweep,settings,baseline,env,study,method,protocol,replicates,"), "{csv}");
         assert!(csv.lines().next().unwrap().contains(",paired_replicates,rliable_probability,"), "{csv}");
+    }
+
+    /// Two `-S` sweeps of one file share its name, not their baseline: each variant is held
+    /// against its own, and the two are shown (and corrected) apart.
+    #[test]
+    fn two_sweeps_of_one_file_keep_their_own_baseline() {
+        let mut rows = Vec::new();
+        for r in 0..3 {
+            for (study, v) in [("s[c=0.5]", 1.0), ("s[c=none]", 2.0), ("s[m=3]", 10.0), ("s[m=5]", 5.0)] {
+                rows.push(row(study, r, "drex", &[v + r as f64]));
+            }
+        }
+        let (agg, _) = aggregate(&rows, &BTreeMap::new());
+        let tagged = |label: &str, baseline: &str| VariantTag { baseline: baseline.into(), ..tag(label) };
+        let tags: BTreeMap<String, VariantTag> = [
+            ("s[c=0.5]".to_string(), tagged("c=0.5", "s[c=0.5]")),
+            ("s[c=none]".to_string(), tagged("c=none", "s[c=0.5]")),
+            ("s[m=3]".to_string(), tagged("m=3", "s[m=3]")),
+            ("s[m=5]".to_string(), tagged("m=5", "s[m=3]")),
+        ]
+        .into();
+        let out = super::rows(&agg, &tags);
+        let got: Vec<(&str, &str, Option<usize>)> =
+            out.iter().map(|r| (r.study.as_str(), r.baseline.as_str(), r.against_baseline.map(|i| i.wins))).collect();
+        assert_eq!(
+            got,
+            [("s[c=0.5]", "s[c=0.5]", None), ("s[c=none]", "s[c=0.5]", Some(3)), ("s[m=3]", "s[m=3]", None), ("s[m=5]", "s[m=3]", Some(0))]
+        );
+        let md = markdown(&out);
+        assert!(md.contains("(baseline `s[c=0.5]`)") && md.contains("(baseline `s[m=3]`)"), "{md}");
+        let demos = BTreeMap::new();
+        let decisions = decide(&out, &Sources { protocols: &rows, terms: &[], demos: &demos, accuracy: &[] });
+        assert_eq!(decisions.iter().map(|d| d.family).collect::<Vec<_>>(), [1, 1], "two families of one");
     }
 
     /// Three variants on 10 replicates, D-REX by the true return: `a` above on all 10 by far,
