@@ -5,7 +5,8 @@
 //!
 //! A stage's time is estimated from the store: per stage kind, the median of the stored
 //! artifacts' seconds per unit of work (PPO and demonstrator steps, BC iterations, T-REX
-//! iterations x models, rollouts, evaluation episodes), times this node's work. Kinds the
+//! iterations x models x the mean window's steps, rollouts, evaluation episodes), times this
+//! node's work. Kinds the
 //! store has not seen use figures measured on the 2-core reference machine at the paper's
 //! settings. Stored nodes cost nothing.
 use std::collections::BTreeMap;
@@ -21,7 +22,9 @@ fn work(params: &Params) -> f64 {
         Params::Demonstrator(p) => p.ppo.total_steps,
         Params::Bc(p) => p.bc.iterations,
         Params::MultiBcRollouts(p) => p.clone.bc.iterations * 3 + p.schedule.len() * p.rollouts_per_level,
-        Params::Trex(p) => p.trex.iterations * p.trex.models,
+        // A pair's cost is its windows' steps: SSRR's 50-500-step snippets (`window_max`) took
+        // 1665 s where 50 steps took 265 s (HalfCheetah, one thread, AMD Zen 4).
+        Params::Trex(p) => p.trex.iterations * p.trex.models * (p.trex.window + p.trex.window_max.unwrap_or(p.trex.window)) / 2,
         Params::NoiseRollouts(p) => p.schedule.len() * p.rollouts_per_level,
         Params::InterpolationRollouts(p) => p.alphas.len() * p.rollouts_per_level,
         Params::ActionNoiseRollouts(p) => p.sigmas.len() * p.rollouts_per_level,
@@ -46,7 +49,7 @@ fn reference_rate(kind: StageKind) -> f64 {
         StageKind::Ppo | StageKind::Demonstrator | StageKind::BankPolicy | StageKind::Probe => 65.0 / 1e6,
         StageKind::Bc => 80.0 / 50_000.0,
         StageKind::MultiBcRollouts => 220.0 / 150_100.0,
-        StageKind::Trex => 160.0 / 9_000.0,
+        StageKind::Trex => 160.0 / (9_000.0 * 50.0),
         StageKind::NoiseRollouts | StageKind::InterpolationRollouts | StageKind::ActionNoiseRollouts => 20.0 / 100.0,
         // 26 checkpoints of 20 episodes each.
         StageKind::Eval => 12.0 / 20.0,
@@ -199,6 +202,35 @@ mod tests {
         assert_eq!(path.iter().map(|p| cost(g.get(p).unwrap())).sum::<f64>(), total);
         // Two T-REX trainings lie on it (D-REX's, then iD-REX's), as in the paper's DAG.
         assert!(path.iter().filter(|p| g.get(p).unwrap().kind() == StageKind::Trex).count() >= 2, "{path:?}");
+    }
+
+    /// T-REX's work grows with its windows: a store that measured 50-step windows estimates
+    /// 50-500-step ones at 5.5 times the seconds, and more members at their number.
+    #[test]
+    fn a_trex_stage_costs_its_windows_steps() {
+        let g = graph();
+        let trex = g.nodes.iter().find(|n| n.kind() == StageKind::Trex).unwrap();
+        let with = |f: &dyn Fn(&mut crate::algo::trex::TrexConfig)| {
+            let mut n = trex.clone();
+            let Params::Trex(p) = &mut n.params else { unreachable!() };
+            f(&mut p.trex);
+            n
+        };
+        let measured = Manifest {
+            kind: trex.kind().name().into(),
+            version: trex.kind().version(),
+            params: trex.params.to_json(),
+            wall_s: 265.0,
+            ..Default::default()
+        };
+        let e = Estimates::from_manifests(&[measured]);
+        assert!((e.seconds(trex) - 265.0).abs() < 1e-9);
+        let long = with(&|t| t.window_max = Some(500));
+        assert!((e.seconds(&long) - 265.0 * 5.5).abs() < 1e-6, "{}", e.seconds(&long));
+        let eight = with(&|t| t.models = 8);
+        assert!((e.seconds(&eight) - 265.0 * 8.0 / 3.0).abs() < 1e-6);
+        // The reference machine's figure is the paper's settings' 160 s.
+        assert!((Estimates::default().seconds(trex) - 160.0).abs() < 1e-9);
     }
 
     #[test]
