@@ -4,9 +4,11 @@ replicate (the variants of one replicate share its demonstrations and BC), by th
 baseline's on at least 7 of the 10 replicates; the two or three passing variants with the
 highest median paired difference go to PPO.
 
-Reads `idrex pipeline plan FILE` (node names and keys) and the store's manifests (JSON):
+Reads `idrex pipeline plan FILE` (node names and keys) and the manifests of stores and of
+archives (`idrex export`, `.ndjson` or `.ndjson.zst`: the committed replicates, so that the
+screen is read on any machine):
 
-    idrex pipeline plan FILE | python analysis/screen.py STORE [SCORE] > screen.csv
+    idrex pipeline plan FILE | python analysis/screen.py [--score SCORE] SOURCE... > screen.csv
 
 SCORE is a probe metric: `true_return` (the last quarter's training episodes; the default) or
 `final_forward` (the final policy's forward term). Beside each variant, the wall time of its
@@ -19,6 +21,7 @@ import math
 import os
 import re
 import statistics
+import subprocess
 import sys
 
 BASELINE = "shipped"
@@ -47,13 +50,25 @@ def plan_nodes(lines):
     return nodes
 
 
-def manifests_by_prefix(store):
+def manifests_by_prefix(source):
+    """A store directory's manifests, or an archive's lines (zstd through the `zstd` command)."""
     out = {}
-    for d in os.listdir(store):
-        path = os.path.join(store, d, "manifest.json")
-        if os.path.isfile(path):
-            with open(path) as f:
-                out[d[:12]] = json.load(f)
+    if os.path.isdir(source):
+        for d in os.listdir(source):
+            path = os.path.join(source, d, "manifest.json")
+            if os.path.isfile(path):
+                with open(path) as f:
+                    out[d[:12]] = json.load(f)
+        return out
+    if source.endswith(".zst"):
+        text = subprocess.run(["zstd", "-dc", source], check=True, capture_output=True, text=True).stdout
+    else:
+        with open(source) as f:
+            text = f.read()
+    for line in text.splitlines():
+        if line.strip():
+            m = json.loads(line)
+            out[m["key"][:12]] = m
     return out
 
 
@@ -95,8 +110,16 @@ def screen(nodes, stored, score):
     return rows
 
 
-def main(store, score="true_return"):
-    rows = screen(plan_nodes(sys.stdin), manifests_by_prefix(store), score)
+def main(args):
+    score = "true_return"
+    if args[:1] == ["--score"]:
+        score, args = args[1], args[2:]
+    if not args:
+        sys.exit("usage: idrex pipeline plan FILE | python analysis/screen.py [--score SCORE] STORE_OR_ARCHIVE...")
+    stored = {}
+    for source in args:
+        stored.update(manifests_by_prefix(source))
+    rows = screen(plan_nodes(sys.stdin), stored, score)
     fields = ["variant", "probed", "paired", "above_baseline", "median_paired_diff", "sign_test_p",
               "median_probe", "passes", "to_ppo", "own_wall_s_per_replicate"]
     w = csv.DictWriter(sys.stdout, fieldnames=fields, restval="")
@@ -105,4 +128,4 @@ def main(store, score="true_return"):
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:])
+    main(sys.argv[1:])

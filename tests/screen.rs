@@ -14,6 +14,10 @@ fn the_screen_reads_the_plan_and_applies_the_rule() {
     let plan = stdout(&plan);
     // A probe per variant and replicate, stored under its planned key: `aligned` above the
     // baseline on 8 of 10 (passes), `ou` on 6 (fails), every other variant tied with it.
+    // Replicates 5-9 go to an archive instead (what `idrex export` writes, one manifest per
+    // line): the screen reads the two together as it would the committed replicates.
+    let archive = dir.join("r5-9.ndjson");
+    let mut archived = String::new();
     let mut probes = 0;
     for line in plan.lines() {
         let f: Vec<&str> = line.split_whitespace().collect();
@@ -28,14 +32,22 @@ fn the_screen_reads_the_plan_and_applies_the_rule() {
             ("ou", _) => 80.0,
             _ => 100.0,
         };
-        let manifest = format!(r#"{{"kind":"probe","node":"{node}","metrics":{{"true_return":{score}}},"wall_s":15.0}}"#);
-        let at = store.join(format!("{key}{}", "0".repeat(52)));
-        std::fs::create_dir_all(&at).unwrap();
-        std::fs::write(at.join("manifest.json"), manifest).unwrap();
+        let key = format!("{key}{}", "0".repeat(52));
+        let manifest = format!(r#"{{"key":"{key}","kind":"probe","node":"{node}","metrics":{{"true_return":{score}}},"wall_s":15.0}}"#);
+        if r >= 5 {
+            archived.push_str(&(manifest + "\n"));
+        } else {
+            let at = store.join(&key);
+            std::fs::create_dir_all(&at).unwrap();
+            std::fs::write(at.join("manifest.json"), manifest).unwrap();
+        }
         probes += 1;
     }
+    std::fs::write(&archive, archived).unwrap();
     assert_eq!(probes, 90, "9 variants x 10 replicates:\n{plan}");
-    let out = python_with_input(&[repo("analysis/screen.py"), store.clone()], &plan);
+    let only_store = python_with_input(&[repo("analysis/screen.py"), store.clone()], &plan);
+    assert!(stdout(&only_store).contains("aligned,5,5,5,"), "the store alone holds replicates 0-4: {}", stdout(&only_store));
+    let out = python_with_input(&[repo("analysis/screen.py"), store.clone(), archive], &plan);
     assert!(out.status.success(), "{}", stderr(&out));
     let csv = stdout(&out);
     let row = |v: &str| csv.lines().find(|l| l.starts_with(&format!("{v},"))).unwrap_or_else(|| panic!("{v}:\n{csv}")).to_string();
