@@ -2,7 +2,7 @@
 # Lands replicates of issue 77's HalfCheetah screen (analysis/results/reward-search3/), one
 # after another, each with one job: run two of these side by side (even and odd replicates),
 # which keeps both cores busy through each replicate's long tail. For each replicate R it
-# writes, under analysis/results/reward-search3/screen/:
+# writes, under analysis/results/reward-search3/report/screen/:
 #   rR.ndjson.zst     the replicate's stored stages' manifests (`idrex export`: the probes'
 #                     metrics, the stages' wall times), to commit, so that the screen is read
 #                     on any machine and a new machine's store need not redo it;
@@ -15,7 +15,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 [ $# -gt 0 ] || { echo "usage: $0 R [R...] (replicates 0-9)" >&2; exit 2; }
 file=analysis/results/reward-search3/tuning-halfcheetah.yaml
-out=analysis/results/reward-search3/screen
+out=analysis/results/reward-search3/report/screen
 mkdir -p "$out"
 ./dev --version >/dev/null # set-up and build, where needed
 target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' .cargo/config.toml)"
