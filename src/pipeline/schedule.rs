@@ -6,9 +6,8 @@
 //! A stage's time is estimated from the store: per stage kind, the median of the stored
 //! artifacts' seconds per unit of work (PPO and demonstrator steps, BC iterations, T-REX
 //! iterations x models x the mean window's steps, rollouts, evaluation episodes), times this
-//! node's work. Kinds the
-//! store has not seen use figures measured on the 2-core reference machine at the paper's
-//! settings. Stored nodes cost nothing.
+//! node's work. Kinds the store has not seen use figures measured on the 2-core reference
+//! machine at the paper's settings. Stored nodes cost nothing.
 use std::collections::BTreeMap;
 
 use super::graph::{Graph, Node};
