@@ -150,6 +150,10 @@ print("ok", len(sys.argv) - 1)
         assert!(md.contains(&format!("figures/{stem}.png")), "{stem} linked: {md}");
         let svg = std::fs::read_to_string(figures.join(format!("{stem}.svg"))).unwrap();
         assert!(svg.starts_with("<svg") && svg.contains("true return"), "{stem}.svg has labelled axes");
+        // The major grid only: plotters' minor grid (faint lines, 10 per division) was most of
+        // every SVG's bytes.
+        let grid = svg.matches("<line opacity=").count();
+        assert!((4..60).contains(&grid), "{stem}.svg draws {grid} grid lines");
         let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(figures.join(format!("{stem}.png"))).unwrap()));
         let mut reader = decoder.read_info().unwrap();
         let mut pixels = vec![0; reader.output_buffer_size().unwrap()];

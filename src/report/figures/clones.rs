@@ -4,7 +4,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::{FONT, Figure, e2s, legend, range};
+use super::{FONT, Figure, MINOR_GRID, e2s, legend, range};
 use crate::report::clones::CloneRow;
 
 pub struct CloneScatter {
@@ -32,6 +32,7 @@ impl Figure for CloneScatter {
             .map_err(e2s)?;
         chart
             .configure_mesh()
+            .max_light_lines(MINOR_GRID)
             .x_desc("source: true return of the episodes the clone learned from")
             .y_desc("clone: mean true return of its noise-free episodes")
             .label_style((FONT, 14))

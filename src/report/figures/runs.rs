@@ -35,6 +35,7 @@ impl Figure for Degradation {
             .map_err(e2s)?;
         chart
             .configure_mesh()
+            .max_light_lines(MINOR_GRID)
             .x_desc("noise level (epsilon; 1 - alpha for interpolation)")
             .y_desc("true return")
             .label_style((FONT, 14))
@@ -92,6 +93,7 @@ impl Figure for RewardScatter {
             .map_err(e2s)?;
         chart
             .configure_mesh()
+            .max_light_lines(MINOR_GRID)
             .x_desc("true return")
             .y_desc("predicted return (ensemble mean, summed over the episode)")
             .label_style((FONT, 14))
@@ -148,6 +150,7 @@ impl Figure for PpoCurves {
                 .map_err(e2s)?;
             chart
                 .configure_mesh()
+                .max_light_lines(MINOR_GRID)
                 .x_desc("PPO environment steps")
                 .y_desc(if learned { "learned return (ensemble mean)" } else { "true return" })
                 .label_style((FONT, 13))
@@ -208,6 +211,7 @@ impl Figure for FinalBars {
         let labels: Vec<&'static str> = methods.iter().map(|m| m.label()).collect();
         chart
             .configure_mesh()
+            .max_light_lines(MINOR_GRID)
             .disable_x_mesh()
             .x_labels(methods.len())
             .x_label_formatter(&|x| {

@@ -5,7 +5,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::{DEMOS, FONT, Figure, e2s, legend, method_colour, range};
+use super::{DEMOS, FONT, Figure, MINOR_GRID, e2s, legend, method_colour, range};
 use crate::pipeline::Method;
 use crate::report::studies::AggregateRow;
 use crate::report::{Protocol, ProtocolRow};
@@ -50,6 +50,7 @@ impl Figure for Intervals {
                 .map_err(e2s)?;
             chart
                 .configure_mesh()
+                .max_light_lines(MINOR_GRID)
                 .disable_x_mesh()
                 .x_labels(0)
                 .y_desc("true return")
@@ -121,6 +122,7 @@ impl Figure for Profile {
             .map_err(e2s)?;
         chart
             .configure_mesh()
+            .max_light_lines(MINOR_GRID)
             .x_desc("return threshold (run mean of the final policy)")
             .y_desc("fraction of runs above it")
             .label_style((FONT, 13))
