@@ -308,18 +308,40 @@ print("ok")
     export(&compressed);
     let (plain_len, zst) = (std::fs::metadata(&archive).unwrap().len(), std::fs::read(&compressed).unwrap());
     assert!(zst.starts_with(&[0x28, 0xb5, 0x2f, 0xfd]) && (zst.len() as u64) * 3 < plain_len, "{} of {plain_len} bytes", zst.len());
-    for (name, with_store, from) in [("report-archive", false, &compressed), ("report-both", true, &archive)] {
+    // A later phase's archive leaves out what an earlier one holds (`--except`); the two read
+    // together are the whole.
+    let (first_phase, second_phase) = (dir.join("phase1.ndjson"), dir.join("phase2.ndjson.zst"));
+    let plain = std::fs::read_to_string(&archive).unwrap();
+    std::fs::write(&first_phase, plain.lines().take(10).map(|l| format!("{l}\n")).collect::<String>()).unwrap();
+    let ex = idrex(&[
+        "export",
+        repo("pipelines/smoke.yaml").to_str().unwrap(),
+        "--store",
+        store.to_str().unwrap(),
+        "--except",
+        first_phase.to_str().unwrap(),
+        "--out",
+        second_phase.to_str().unwrap(),
+    ]);
+    let said = stdout(&ex);
+    assert!(
+        ex.status.success() && said.contains(": 18 of 28 stages' manifests") && said.contains("; 10 already in"),
+        "{said}{}",
+        stderr(&ex)
+    );
+    for (name, with_store, from) in [
+        ("report-archive", false, vec![&compressed]),
+        ("report-both", true, vec![&archive]),
+        ("report-phases", false, vec![&first_phase, &second_phase]),
+    ] {
         let again = dir.join(name);
         let store_arg = if with_store { store.clone() } else { dir.join("no-store-here") };
-        let rep = idrex(&[
-            "report",
-            "--store",
-            store_arg.to_str().unwrap(),
-            "--archive",
-            from.to_str().unwrap(),
-            "--out",
-            again.to_str().unwrap(),
-        ]);
+        let mut args = vec!["report".to_string(), "--store".into(), store_arg.to_str().unwrap().into()];
+        for a in from {
+            args.extend(["--archive".to_string(), a.to_str().unwrap().to_string()]);
+        }
+        args.extend(["--out".to_string(), again.to_str().unwrap().to_string()]);
+        let rep = idrex(&args.iter().map(String::as_str).collect::<Vec<_>>());
         assert!(rep.status.success(), "{name}: {}", stderr(&rep));
         let files = walk(&out_dir);
         assert!(files.len() > 10, "{files:?}");

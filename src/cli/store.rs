@@ -65,6 +65,10 @@ pub struct ExportArgs {
     /// compressed with zstd where the name ends in `.zst` (`FILE.ndjson.zst`).
     #[arg(long, value_name = "FILE.ndjson")]
     pub out: PathBuf,
+    /// Leave out the stages this archive already holds (repeatable): a later phase of a study
+    /// commits only its own manifests, and `idrex report --archive` reads the phases together.
+    #[arg(long, value_name = "ARCHIVE")]
+    pub except: Vec<PathBuf>,
     #[command(flatten)]
     pub set: super::SetArgs,
 }
@@ -79,9 +83,13 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     };
     store.index()?;
     let keys = sweep.graph()?.keys();
+    let mut archived = std::collections::BTreeSet::new();
+    for a in &args.except {
+        archived.extend(crate::store::archive::keys(a)?);
+    }
     let mut texts = std::collections::BTreeMap::new();
     let mut missing = Vec::new();
-    for (node, key) in &keys {
+    for (node, key) in keys.iter().filter(|(_, key)| !archived.contains(*key)) {
         // Checked once, and (unlike `lookup`) without moving a corrupt artifact aside: this
         // command only reads.
         match store.manifest_text(key) {
@@ -91,12 +99,21 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
             Err(_) => missing.push(node.as_str()),
         }
     }
+    let left_out = keys.iter().filter(|(_, key)| archived.contains(*key)).count();
+    if texts.is_empty() && left_out > 0 {
+        bail!(
+            "{}: every stored stage is already in the --except archives ({left_out} of {}); nothing to export",
+            args.file.display(),
+            keys.len()
+        );
+    }
     if texts.is_empty() {
         bail!("{}: none of its {} stages is in {}; run it first or give --store", args.file.display(), keys.len(), store.location());
     }
     crate::store::archive::write(&args.out, &texts)?;
     let bytes = std::fs::metadata(&args.out).map_or(0, |m| m.len());
-    println!("{}: {} of {} stages' manifests ({bytes} bytes)", args.out.display(), texts.len(), keys.len());
+    let except = if args.except.is_empty() { String::new() } else { format!("; {left_out} already in the --except archives") };
+    println!("{}: {} of {} stages' manifests ({bytes} bytes){except}", args.out.display(), texts.len(), keys.len());
     if let Some(first) = missing.first() {
         println!("not stored intact, so not exported: {} stages (first: {first})", missing.len());
     }

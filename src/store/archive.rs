@@ -105,6 +105,21 @@ fn field<'a>(line: &'a str, name: &str) -> Option<&'a str> {
     None
 }
 
+/// The keys an archive holds, unchecked: enough to leave them out of another archive.
+pub fn keys(path: &Path) -> Result<std::collections::BTreeSet<String>> {
+    let text = text_of(path)?;
+    let lines = text.lines().filter(|l| !l.trim().is_empty());
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            field(line, "key")
+                .and_then(|k| k.strip_prefix('"')?.strip_suffix('"'))
+                .map(str::to_string)
+                .ok_or_else(|| Error::file(path, format!("line {}: no key; write archives with `idrex export`", i + 1)))
+        })
+        .collect()
+}
+
 /// Reads an archive, checking each line's key against `key_of(manifest, its parameters'
 /// text as written)`.
 pub fn read(path: &Path, key_of: impl Fn(&Manifest, &str) -> Result<String>) -> Result<Vec<Manifest>> {
@@ -220,6 +235,8 @@ mod tests {
         write(&zst, &texts).unwrap();
         assert!(std::fs::read(&zst).unwrap().starts_with(&ZSTD_MAGIC));
         assert_eq!(read(&zst, key_of).unwrap(), expected);
+        let keys: Vec<String> = expected.iter().map(|m| m.key.clone()).collect();
+        assert_eq!(super::keys(&zst).unwrap().into_iter().collect::<Vec<_>>(), keys);
         assert!(!dir.join("a.ndjson.zst.partial").exists());
         std::fs::write(&zst, &std::fs::read(&zst).unwrap()[..20]).unwrap();
         let err = read(&zst, key_of).unwrap_err().to_string();

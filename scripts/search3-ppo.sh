@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Lands replicates of issue 77's PPO phase for TASK (analysis/results/reward-search3/
+# ppo-TASK.yaml: the tuning file with its variants cut to `shipped` and those the screen sent
+# to PPO, committed before this runs), one after another, each with one job; run two side by
+# side (even and odd replicates). For each replicate R it writes, under
+# analysis/results/reward-search3/report/ppo-TASK/:
+#   rR.ndjson.zst     the manifests of the replicate's stages that the screen's archive
+#                     (report/screen/rR.ndjson.zst, HalfCheetah's) does not hold
+#                     (`idrex export --except`), so each manifest is committed once;
+#   time-rR[-T].txt   /usr/bin/time -v of each run of it (a resumed replicate has several).
+# A landed replicate is skipped. Nothing is read here: `idrex report` reads the phase once,
+# after the tenth replicate (README.md beside the files). Start both detached:
+#   setsid nohup scripts/search3-ppo.sh halfcheetah 0 2 4 6 8 > ppo-even.log 2>&1 < /dev/null &
+#   setsid nohup scripts/search3-ppo.sh halfcheetah 1 3 5 7 9 > ppo-odd.log 2>&1 < /dev/null &
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+[ $# -gt 1 ] || { echo "usage: $0 TASK R [R...] (TASK: halfcheetah or ant; replicates 0-9)" >&2; exit 2; }
+task="$1"
+shift
+study=analysis/results/reward-search3
+file="$study/ppo-$task.yaml"
+[ -f "$file" ] || { echo "$file: not there; the screen's reading writes and commits it first" >&2; exit 2; }
+out="$study/report/ppo-$task"
+mkdir -p "$out"
+./dev --version >/dev/null # set-up and build, where needed
+target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' .cargo/config.toml)"
+# A private copy, so that a rebuild while this runs does not change the binary under it, and a
+# recording of its own per run (two chains would write one file at once).
+tmp="$(mktemp -d)"
+bin="$tmp/idrex"
+cp "$target/release/idrex" "$bin"
+for r in "$@"; do
+  if [ -f "$out/r$r.ndjson.zst" ]; then echo "replicate $r: landed before"; continue; fi
+  time="$out/time-r$r.txt"
+  [ -e "$time" ] && time="$out/time-r$r-$(date -u +%s).txt"
+  echo "$(date -u +%FT%TZ) replicate $r: start"
+  /usr/bin/time -v -o "$time" "$bin" pipeline run "$file" --only-replicate "$r" --jobs 1 \
+    --store artifacts --recording "$tmp/r$r.rrd"
+  except=()  # the screen ran on HalfCheetah only
+  screened="$study/report/screen/r$r.ndjson.zst"
+  [ "$task" = halfcheetah ] && [ -f "$screened" ] && except=(--except "$screened")
+  "$bin" export "$file" --only-replicate "$r" --store artifacts "${except[@]}" --out "$out/r$r.ndjson.zst"
+  echo "$(date -u +%FT%TZ) replicate $r: landed"
+done
