@@ -55,4 +55,7 @@ fn the_screen_reads_the_plan_and_applies_the_rule() {
     assert!(row("aligned").starts_with("aligned,10,10,8,10.0,0.0547,110.0,True,True,"), "{csv}");
     assert!(row("ou").starts_with("ou,10,10,6,20.0,0.3770,120.0,False,,"), "{csv}");
     assert!(row("held").starts_with("held,10,10,0,0.0,,100.0,False,,"), "{csv}");
+    // The median paired difference's interval, d(2) to d(9) of the ten sorted differences.
+    assert!(row("aligned").ends_with(",-10.0,10.0,0.979") && row("ou").ends_with(",-20.0,20.0,0.979"), "{csv}");
+    assert!(row("shipped").ends_with(",,,"), "{csv}");
 }
