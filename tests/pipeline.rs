@@ -292,16 +292,19 @@ print("ok")
     // An archive of the stages' manifests rebuilds the same report, figures and all, with no
     // store at all (from the compressed archive), and with the store beside it; an edited
     // definition is refused.
+    // What `idrex export` said, with `extra` arguments before `--out archive`.
+    let export_with = |extra: &[&str], archive: &std::path::Path| {
+        let smoke = repo("pipelines/smoke.yaml");
+        let mut args = vec!["export", smoke.to_str().unwrap(), "--store", store.to_str().unwrap()];
+        args.extend(extra);
+        args.extend(["--out", archive.to_str().unwrap()]);
+        let ex = idrex(&args);
+        assert!(ex.status.success(), "{}{}", stdout(&ex), stderr(&ex));
+        stdout(&ex)
+    };
     let export = |archive: &std::path::Path| {
-        let ex = idrex(&[
-            "export",
-            repo("pipelines/smoke.yaml").to_str().unwrap(),
-            "--store",
-            store.to_str().unwrap(),
-            "--out",
-            archive.to_str().unwrap(),
-        ]);
-        assert!(ex.status.success() && stdout(&ex).contains(": 28 of 28 stages' manifests"), "{}{}", stdout(&ex), stderr(&ex));
+        let said = export_with(&[], archive);
+        assert!(said.contains(": 28 of 28 stages' manifests"), "{said}");
     };
     let (archive, compressed) = (dir.join("smoke.ndjson"), dir.join("smoke.ndjson.zst"));
     export(&archive);
@@ -313,22 +316,8 @@ print("ok")
     let (first_phase, second_phase) = (dir.join("phase1.ndjson"), dir.join("phase2.ndjson.zst"));
     let plain = std::fs::read_to_string(&archive).unwrap();
     std::fs::write(&first_phase, plain.lines().take(10).map(|l| format!("{l}\n")).collect::<String>()).unwrap();
-    let ex = idrex(&[
-        "export",
-        repo("pipelines/smoke.yaml").to_str().unwrap(),
-        "--store",
-        store.to_str().unwrap(),
-        "--except",
-        first_phase.to_str().unwrap(),
-        "--out",
-        second_phase.to_str().unwrap(),
-    ]);
-    let said = stdout(&ex);
-    assert!(
-        ex.status.success() && said.contains(": 18 of 28 stages' manifests") && said.contains("; 10 already in"),
-        "{said}{}",
-        stderr(&ex)
-    );
+    let said = export_with(&["--except", first_phase.to_str().unwrap()], &second_phase);
+    assert!(said.contains(": 18 of 28 stages' manifests") && said.contains("; 10 already in"), "{said}");
     for (name, with_store, from) in [
         ("report-archive", false, vec![&compressed]),
         ("report-both", true, vec![&archive]),

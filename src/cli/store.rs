@@ -87,9 +87,11 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
     for a in &args.except {
         archived.extend(crate::store::archive::keys(a)?);
     }
+    let (left_out, wanted): (Vec<_>, Vec<_>) = keys.iter().partition(|(_, key)| archived.contains(*key));
+    let left_out = left_out.len();
     let mut texts = std::collections::BTreeMap::new();
     let mut missing = Vec::new();
-    for (node, key) in keys.iter().filter(|(_, key)| !archived.contains(*key)) {
+    for (node, key) in wanted {
         // Checked once, and (unlike `lookup`) without moving a corrupt artifact aside: this
         // command only reads.
         match store.manifest_text(key) {
@@ -99,7 +101,6 @@ pub fn export(args: &ExportArgs) -> anyhow::Result<()> {
             Err(_) => missing.push(node.as_str()),
         }
     }
-    let left_out = keys.iter().filter(|(_, key)| archived.contains(*key)).count();
     if texts.is_empty() && left_out > 0 {
         bail!(
             "{}: every stored stage is already in the --except archives ({left_out} of {}); nothing to export",
