@@ -20,15 +20,13 @@ shift
 study=analysis/results/reward-search3
 file="$study/ppo-$task.yaml"
 [ -f "$file" ] || { echo "$file: not there; the screen's reading writes and commits it first" >&2; exit 2; }
+# Declared before it runs: committed, and unchanged since.
+git ls-files --error-unmatch "$file" >/dev/null 2>&1 && git diff --quiet HEAD -- "$file" ||
+  { echo "$file: not committed as it is; commit it before it runs (declared before any result)" >&2; exit 2; }
 out="$study/report/ppo-$task"
 mkdir -p "$out"
-./dev --version >/dev/null # set-up and build, where needed
-target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' .cargo/config.toml)"
-# A private copy, so that a rebuild while this runs does not change the binary under it, and a
-# recording of its own per run (two chains would write one file at once).
-tmp="$(mktemp -d)"
-bin="$tmp/idrex"
-cp "$target/release/idrex" "$bin"
+bin="$(scripts/private-idrex.sh)"
+tmp="$(dirname "$bin")"
 for r in "$@"; do
   if [ -f "$out/r$r.ndjson.zst" ]; then echo "replicate $r: landed before"; continue; fi
   time="$out/time-r$r.txt"
