@@ -17,13 +17,8 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 file=analysis/results/reward-search3/tuning-halfcheetah.yaml
 out=analysis/results/reward-search3/report/screen
 mkdir -p "$out"
-./dev --version >/dev/null # set-up and build, where needed
-target="$(sed -n 's/^target-dir = "\(.*\)"$/\1/p' .cargo/config.toml)"
-# A private copy, so that a rebuild while this runs does not change the binary under it, and a
-# recording of its own per run (two chains would write one file at once).
-tmp="$(mktemp -d)"
-bin="$tmp/idrex"
-cp "$target/release/idrex" "$bin"
+bin="$(scripts/private-idrex.sh)"
+tmp="$(dirname "$bin")"
 for r in "$@"; do
   if [ -f "$out/r$r.ndjson.zst" ]; then echo "replicate $r: landed before"; continue; fi
   time="$out/time-r$r.txt"
