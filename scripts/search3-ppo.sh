@@ -19,7 +19,7 @@ phase="$1"
 shift
 study=analysis/results/reward-search3
 file="$study/ppo-$phase.yaml"
-[ -f "$file" ] || { echo "$file: not there; the screen's reading writes and commits it first" >&2; exit 2; }
+[ -f "$file" ] || { echo "$file: not there; write the phase's file and commit it first" >&2; exit 2; }
 # Declared before it runs: committed, and unchanged since.
 git ls-files --error-unmatch "$file" >/dev/null 2>&1 && git diff --quiet HEAD -- "$file" ||
   { echo "$file: not committed as it is; commit it before it runs (declared before any result)" >&2; exit 2; }
